@@ -3,8 +3,9 @@
 Pure parts without hardware: frame-id gaps, device→host clock mapping, pairing by device stamp, sync planning,
 device lookup, the UVC skew bound. The real GVCP/GVSP path: two Aravis fake GigE Vision cameras
 (``arv-fake-gv-camera-0.8``) on 127.0.0.1 / 127.0.0.2 in a private network namespace
-(:func:`nodes.camera.fakecam.isolated`), streamed through the camera node into the triangulator. This file
-doubles as the script run inside the namespace (``python3 tests/nodes/test_camera_genicam.py child OUT``).
+(:func:`flexsheet.benches.fakecam.isolated`), streamed through the camera node into the triangulator. This
+file doubles as the script run inside the namespace (``python3 tests/nodes/test_camera_genicam.py child
+OUT``).
 """
 
 from __future__ import annotations
@@ -245,7 +246,7 @@ def test_genicam_camera_not_found_fails_setup_with_a_clear_error(tmp_path):
 
 # ------------------------------------------------------------- two fake GigE Vision cameras (real GVCP/GVSP)
 def _in_namespace(args: list[str], timeout: float = 120.0) -> subprocess.CompletedProcess:
-    from nodes.camera.fakecam import isolated
+    from flexsheet.benches.fakecam import isolated
 
     return subprocess.run(isolated(args), capture_output=True, text=True, timeout=timeout, cwd=ROOT)
 
@@ -291,7 +292,7 @@ def test_genicam_fake_pair_streams_through_camera_node_into_triangulator(tmp_pat
 
 def test_bench_camera_genicam_reports_rate_skew_and_dropped_frames(tmp_path):
     out = tmp_path / "bench.json"
-    r = subprocess.run([sys.executable, "-m", "nodes.camera.bench", "--genicam", "--seconds", "3",
+    r = subprocess.run([sys.executable, "-m", "flexsheet.benches.camera", "--genicam", "--seconds", "3",
                         "--lost-permille", "5", "--out", str(out), "--json"],
                        capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -310,9 +311,9 @@ def test_bench_camera_genicam_reports_rate_skew_and_dropped_frames(tmp_path):
 
 # ------------------------------------------------------------------------------- child (inside the namespace)
 async def _child(out_path: str) -> None:
+    from flexsheet.benches.fakecam import fake_pair
     from flexsheet.runtime.testing import NodeHarness
     from messages import topics
-    from nodes.camera.fakecam import fake_pair
     from nodes.camera.node import CameraNode
     from nodes.triangulator.node import TriangulatorNode
 

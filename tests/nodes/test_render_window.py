@@ -14,6 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
+from flexsheet.benches.xvfb import XvfbError, grab, xvfb
 from flexsheet.model import geometry
 from flexsheet.model.projector import Projector
 from flexsheet.model.sheet import SheetSurface
@@ -21,7 +22,6 @@ from flexsheet.rendering.pacing import LEFT, RIGHT, FramePacer, frame_layout
 from flexsheet.rendering.stereo_renderer import StereoRenderer, cylinder_draw_mesh
 from flexsheet.runtime.testing import NodeHarness
 from messages import topics
-from nodes.renderer.xvfb import XvfbError, grab, xvfb
 
 W, H = 160, 120
 R = geometry.CYLINDER_RADIUS

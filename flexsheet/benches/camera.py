@@ -2,7 +2,10 @@
 
 Without ``--left``/``--right`` it measures two Aravis fake GigE Vision cameras (``arv-fake-gv-camera-0.8``)
 on 127.0.0.1 and 127.0.0.2, re-running itself in a private network namespace when 127.0.0.2 is not
-assigned here (:mod:`nodes.camera.fakecam`); with serials it measures the lab's cameras.
+assigned here (:mod:`flexsheet.benches.fakecam`); with serials it measures the lab's cameras. The pair is
+opened as the camera node opens it: the stereo camera port's ``genicam`` source
+(:func:`flexsheet.vision.camera_port.camera_source`) with the camera node's params (its node type's
+``Params``), the bench standing in for the node as the source's host.
 
 Keys (one flat JSON object with ``--json``; ``--out FILE`` writes it, ``--plot FILE.png`` draws the skew
 histogram and the pair intervals):
@@ -22,52 +25,85 @@ histogram and the pair intervals):
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
+import logging
 import os
 import subprocess
 import sys
 import threading
 import time
+from typing import Any
 
 import numpy as np
 
-from nodes.camera.fakecam import ENV_FLAG, addresses_ready, fake_pair, isolated
-from nodes.camera.genicam import GenICamConfig, GenICamStereo
+from flexsheet.benches.fakecam import ENV_FLAG, addresses_ready, fake_pair, isolated
+from flexsheet.runtime.plugins import node_class
+from flexsheet.vision.camera_port import camera_source
 
-__all__ = ["main", "measure"]
+__all__ = ["main", "measure", "camera_params"]
 
 FAKE_SERIALS = ("FSLEFT01", "FSRIGHT01")
 
 
-def measure(cfg: GenICamConfig, seconds: float, fake: bool, progress: bool = False) -> tuple[dict, dict]:
-    """Stream the pair for ``seconds`` s; returns (flat figures dict (module doc), raw series dict:
-    ``skew_ms``, ``interval_ms``). Raises what :meth:`GenICamStereo.start` raises."""
-    lock = threading.Lock()
-    rows: list[tuple[float, float, int, int, float]] = []
+class _Host:
+    """The bench as the ``genicam`` source's host (:class:`~flexsheet.vision.camera_port.CameraHost`): the
+    camera node's ``params`` and a logger; the pairs themselves are counted, not published."""
+
+    def __init__(self, params: Any) -> None:
+        self.params = params
+        self.log = logging.getLogger("flexsheet.bench.camera")
+        self.published = 0
+
+    def publish_pair(self, left: np.ndarray, right: np.ndarray, stamp: float, skew: float = 0.0) -> None:
+        self.published += 1
+
+
+def camera_params(left: str, right: str, **fields: Any) -> Any:
+    """The camera node's params (its node type's ``Params``, validated as a launch file's) for the GenICam
+    pair ``left``/``right`` (serials) with ``fields`` (``width``, ``height``, ``exposure_s``, ``rate_hz``,
+    ``trigger``, ``trigger_line``, ``device_clock``, …). Raises ``ValueError`` naming a bad field."""
+    return node_class("camera").Params(source="genicam", left_id=left, right_id=right, **fields)
+
+
+async def _stream(params: Any, seconds: float, progress: bool, rows: list, lock: threading.Lock) -> dict:
+    """Open the pair through the port, keep each pair's (stamp, skew, left/right device ns, arrival) in
+    ``rows`` for ``seconds`` s, close it; its counters at closing."""
+    src = await camera_source("genicam").open(_Host(params), {"image_size": (params.width, params.height)})
+    st = src.genicam                        # the source's GenICam pair (its counters and pairer)
+    forward = st.pairer.on_pair
 
     def on_pair(p) -> None:
         with lock:
             rows.append((p.stamp_s, p.skew_s, p.left.device_ns, p.right.device_ns, time.time()))
-
-    st = GenICamStereo(cfg, on_pair=on_pair)
-    st.start()
+        forward(p)
+    st.pairer.on_pair = on_pair
     try:
         t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
-            time.sleep(min(1.0, max(0.0, t_end - time.monotonic())))
+            await asyncio.sleep(min(1.0, max(0.0, t_end - time.monotonic())))
             if progress:
-                print(f"[bench camera] {st.summary_line()}", file=sys.stderr, flush=True)
+                print(f"[bench camera] {src.status_line()}", file=sys.stderr, flush=True)
     finally:
-        st.close()
-    s = st.stats()
+        await src.close()
+    return st.stats()
+
+
+def measure(params: Any, seconds: float, fake: bool, progress: bool = False) -> tuple[dict, dict]:
+    """Stream the pair of the camera node's ``params`` (:func:`camera_params`) for ``seconds`` s; returns
+    (flat figures dict (module doc), raw series dict: ``skew_ms``, ``interval_ms``). Raises ``ValueError``
+    when the source cannot start (a camera not found, Aravis missing)."""
+    lock = threading.Lock()
+    rows: list[tuple[float, float, int, int, float]] = []
+    s = asyncio.run(_stream(params, seconds, progress, rows, lock))
     with lock:
         r = np.array(rows, float) if rows else np.zeros((0, 5))
     el = max(s["elapsed_s"], 1e-9)
     skew_ms = r[:, 1] * 1e3
     interval_ms = np.diff(r[:, 2]) * 1e-6
     out = {
-        "mode": "fake" if fake else "real", "seconds": round(el, 3), "rate_hz_requested": cfg.rate_hz,
-        "width": cfg.width, "height": cfg.height, "trigger": s.get("trigger"),
+        "mode": "fake" if fake else "real", "seconds": round(el, 3), "rate_hz_requested": params.rate_hz,
+        "width": params.width, "height": params.height, "trigger": s.get("trigger"),
         "ptp_locked": s.get("ptp_locked"),
         "skew_basis": s.get("skew_basis"), "pairs": int(s.get("pairs", 0)),
         "pair_rate_hz": round(s.get("pairs", 0) / el, 3),
@@ -150,15 +186,19 @@ def main(argv: list[str] | None = None) -> int:
     fake = not a.left
     if fake and not addresses_ready() and not os.environ.get(ENV_FLAG):
         try:
-            cmd = isolated([sys.executable, "-m", "nodes.camera.bench", *argv])
+            cmd = isolated([sys.executable, "-m", "flexsheet.benches.camera", *argv])
         except RuntimeError as exc:
             print(f"flexsheet bench camera: {exc}", file=sys.stderr)
             return 2
         return subprocess.run(cmd).returncode
-    cfg = GenICamConfig(left_id=a.left or FAKE_SERIALS[0], right_id=a.right or FAKE_SERIALS[1], width=a.width,
-                        height=a.height, exposure_s=a.exposure, rate_hz=a.rate,
-                        trigger=a.trigger or ("free" if fake else "software"), trigger_line=a.trigger_line,
-                        device_clock=a.device_clock or ("shared" if fake else "auto"))
+    try:
+        cfg = camera_params(a.left or FAKE_SERIALS[0], a.right or FAKE_SERIALS[1], width=a.width,
+                            height=a.height, exposure_s=a.exposure, rate_hz=a.rate,
+                            trigger=a.trigger or ("free" if fake else "software"),
+                            trigger_line=a.trigger_line,
+                            device_clock=a.device_clock or ("shared" if fake else "auto"))
+    except ValueError as exc:
+        p.error(str(exc))
     who = "two fake cameras" if fake else f"{a.left} + {a.right}"
     print(f"[bench camera] {who}: {cfg.width}x{cfg.height} at {cfg.rate_hz} Hz, trigger {cfg.trigger}, "
           f"{a.seconds} s", file=sys.stderr, flush=True)

@@ -11,16 +11,16 @@ Prints one flat JSON object (``--json``) or a table. Figures (PNG + JSON of the 
   same stroke, a new one every 48 Hz frame, the bridge cycling at 7.1 ms; ``motion_plan_median_us``: the
   planner's segment (ruckig and the joint-rate check of both arms).
 - ``cycle_period_ms``, ``cycle_jitter_p99_ms`` (p99 of |interval − 7.1 ms|), ``cycle_late_p99_ms``
-  (p99 of start − deadline): the bridge's :class:`~flexsheet.arm.stream.ArmStream` streaming to a twin
-  running in a separate process, over ``--cycles`` cycles (default 10 000).
+  (p99 of start − deadline): the bridge's :class:`~flexsheet.arm.stream.ArmStream` streaming over its Modbus
+  link to a twin running in a separate process, over ``--cycles`` cycles (default 10 000).
 - ``track_*``: the twin (servo model) following a stroke in simulated time: clamp position error
   (max, rms, mm) and the lag (ms) minimising the error, for 10 s and 30 s strokes (the paper's Table I) and
   a 2 s stroke (where the speed limits start to bite).
 
 ``--protocol mxt`` measures the MELFA real-time external control link instead (nothing else): the bridge's
-:class:`~flexsheet.arm.stream.ArmStream` + :class:`~nodes.arm_bridge.mxt_link.MxtLink` streaming MOVE packets
-to the MXT twin (:class:`~flexsheet.twin.mxt_server.MxtTwin`) in another process over UDP on
-loopback, following a ±60° stroke, for ``--cycles`` cycles at ``--period`` (7.11 ms):
+:class:`~flexsheet.arm.stream.ArmStream` + the MXT link streaming MOVE packets to the MXT twin
+(:class:`~flexsheet.twin.mxt_server.MxtTwin`) in another process over UDP on loopback, following a ±60°
+stroke, for ``--cycles`` cycles at ``--period`` (7.11 ms):
 
 - ``mxt_send_period_ms``, ``mxt_jitter_p50_ms`` / ``mxt_jitter_p99_ms`` / ``mxt_jitter_max_ms``: interval
   between consecutive MOVE packets and its deviation |Δt − period| (the bridge is paced by the replies, so
@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.controller_port import controller_source
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.sheet_motion import JointRates, SheetShaper
@@ -61,10 +62,11 @@ from flexsheet.twin.controller import ControllerCore
 from flexsheet.twin.modbus_server import ControllerTwin
 from flexsheet.twin.mxt_server import MxtCore, MxtTwin
 from messages.registers import encode_joints
-from nodes.arm_bridge.modbus_link import ModbusLink
-from nodes.arm_bridge.mxt_link import MxtLink
 
 PERIOD = 0.0071
+#: the bridge's links come from the controller port's source of a controller over the network, as the
+#: lab's arm PCs reach theirs (:meth:`~flexsheet.arm.controller_port.ControllerSource.link`)
+SOURCE = "tcp"
 MXT_PERIOD = 0.00711
 EPILOG = ("example: flexsheet bench arm --json --cycles 2000 --out docs/figures/arm\n"
           "example: flexsheet bench arm --protocol mxt --json --cycles 10000 --out docs/figures/arm")
@@ -217,7 +219,8 @@ def bench_cycle(n_cycles: int) -> dict:
         kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
         tr = TargetTracker(kin, target_timeout=1e9)
         lim = StreamLimiter(home_joints("left"), PERIOD, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
-        stream = ArmStream(tr, lim, ModbusLink("127.0.0.1", port, request_timeout=0.5))
+        stream = ArmStream(tr, lim, controller_source(SOURCE).link("modbus", "127.0.0.1", port,
+                                                                     request_timeout=0.5))
         stream.cycle_times = []
         deadlines: list[float] = []
         stream.on_cycle = lambda rep: deadlines.append(rep.t_deadline)
@@ -290,7 +293,8 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
         kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
         tr = TargetTracker(kin, target_timeout=1e9)
         lim = StreamLimiter(home_joints("left"), period, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
-        link = MxtLink("127.0.0.1", port, period=period, lost_cycles=10 ** 9, record=True)
+        link = controller_source(SOURCE).link("mxt", "127.0.0.1", port, period=period, lost_cycles=10 ** 9,
+                                              record=True)
         stream = ArmStream(tr, lim, link)
         done = [0]
 

@@ -1,9 +1,9 @@
 """``flexsheet bench graph [--seconds S] [--json]``: the display's own path on the wall clock, without the
 twin.
 
-Here because the pairs come from the camera node's own twin renderer and registration; the other nodes are
-loaded by their node types (the ``flexsheet.nodes`` entry points, :mod:`flexsheet.runtime.plugins`), as the
-launcher does.
+The pairs come from the camera twin's renderer, with the registration the camera node would publish for the
+ideal twin (:mod:`flexsheet.calibration.published_registration`); the nodes are loaded by their node types
+(the ``flexsheet.nodes`` entry points, :mod:`flexsheet.runtime.plugins`), as the launcher does.
 
 The nodes of the display (triangulator, planner, both arm bridges with their Modbus controller twins, FEM,
 renderer offscreen on this machine's GL) run in one container on the wall clock, fed by a player that
@@ -29,11 +29,12 @@ import json
 import logging
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import yaml
 
+from flexsheet.calibration.published_registration import published_registration
+from flexsheet.dirs import launch_dir
 from flexsheet.runtime.bus import Bus, ContainerTransport
 from flexsheet.runtime.config import NodeConfig
 from flexsheet.runtime.container import Container, Member
@@ -48,9 +49,7 @@ from flexsheet.vision.camera_model import camera_model
 from flexsheet.vision.stereo_calibration import to_message
 from messages import StereoFrame
 from messages import topics as T
-from nodes.camera.node import CameraParams, published_registration
 
-ROOT = Path(__file__).resolve().parents[2]
 RATE_HZ = 48.0
 TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
            "fingertip_to_rendered_frame": {"median_ms": 15.0}}
@@ -60,9 +59,9 @@ PATHS = tuple(TARGETS)
 
 def _frames(n: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], object, np.ndarray]:
     """``n`` stereo pairs of the ideal twin along the paper's 10 s stroke, its calibration and camera pose."""
-    p = CameraParams(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
+    p = node_class("camera").Params(source="sim", model="ximea", twin={"realism": "ideal", "truth_seed": 0})
     calib = camera_model("ximea")
-    published, T_dc, _ = published_registration(p, calib, exact_nominal=True)
+    published, T_dc, _ = published_registration(p.display_calib, calib, exact_nominal=True, model=p.model)
     renderer = twin_renderer(TwinTruth.draw(0, "ideal"), sim_config(p))
     script = FingerScript(mode="stroke", moving_time=10.0)   # the paper's 10 s stroke (the world's default)
     frames = []
@@ -134,7 +133,7 @@ def _stats(x: list[float], target: dict) -> dict:
 
 
 async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
-    lf = yaml.safe_load((ROOT / "launch" / "sim.yaml").read_text())["nodes"]
+    lf = yaml.safe_load((launch_dir() / "sim.yaml").read_text())["nodes"]
     params = {n: dict(lf[n].get("params", {})) for n in lf}
     params["renderer"].update(publish_rate=120.0, max_render_rate=120.0)
     params["ctrl_left"]["port"], params["ctrl_right"]["port"] = 15121, 15122

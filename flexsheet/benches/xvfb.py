@@ -5,8 +5,10 @@ screenshot of it read back through X (not through OpenGL).
 with other servers on the machine) and yields the ``DISPLAY`` string. :func:`grab` reads the root window over
 XCB with Pillow's ``ImageGrab`` (``GetImage`` on the X server): an independent path from the GL read-back, so
 a screenshot shows what X actually received from the window's buffer swap. Mesa's llvmpipe gives GLX 4.5 on
-Xvfb; there is no vsync there (swaps return at once), so the window paces itself by a timer
-(:class:`nodes.renderer.window.ProjectorWindow`). Debian packages: ``xvfb``; Pillow comes with matplotlib.
+Xvfb; there is no vsync there (swaps return at once), so the window paces itself by a timer (the projector
+output port's ``window``, :mod:`flexsheet.rendering.output_port`). Debian packages: ``xvfb``; Pillow comes
+with matplotlib. Not the renderer's device I/O: the node opens its window on whatever ``DISPLAY`` it is
+given; the render bench and the window's tests start this server for it.
 """
 
 from __future__ import annotations

@@ -1,10 +1,12 @@
 """``flexsheet bench viz``: CPU of the viz bridge in the running simulation, per viewer subscription set.
 
-Starts ``launch/sim.yaml`` (or ``--launch``) with a viz node added on a free port, waits for the stroke to
-run, then measures the viz process's CPU (utime + stime from ``/proc/<pid>/stat``, all its threads: Python,
-ZeroMQ I/O, the SDK's tokio workers) over windows of ``--window`` s: no viewer; a viewer with the shipped
-layout's channels (3-D scene, frames, metrics, images); a viewer on every channel; and no viewer again (inputs
-stay subscribed: the transport has no unsubscribe). The viewer is
+Starts ``launch/sim_composed.yaml`` (the simulated display as processes on the wall clock; or ``--launch``, a
+wall-clock launch file: on ``clock: sim`` every node shares one process) with a viz node added in a process of
+its own on a free port, waits for the stroke to run, then measures the viz process's CPU (utime + stime from
+``/proc/<pid>/stat``, all its threads: Python, ZeroMQ I/O, the SDK's tokio workers) over windows of
+``--window`` s: no viewer; a viewer with the shipped layout's channels (3-D scene, frames, metrics, images); a
+viewer on every channel; and no viewer again (inputs stay subscribed: the transport has no unsubscribe). The
+viewer is
 :class:`flexsheet.viz.wsclient.FoxgloveClient`. ``--runs N`` launches the sim N times; ``OUT/viz_cpu.json``
 holds every run and, per window, the median and min/max of the CPU (% of one core); ``OUT/viz_cpu.png`` draws
 them, beside an earlier run's (``--baseline FILE``) when given. ``--param KEY=VALUE`` sets a viz parameter.
@@ -27,6 +29,7 @@ from pathlib import Path
 
 import yaml
 
+from flexsheet.dirs import launch_dir
 from flexsheet.runtime.ports import free_port
 from flexsheet.viz.foxglove import (
     CAMERA_LEFT,
@@ -42,7 +45,6 @@ from flexsheet.viz.wsclient import FoxgloveClient
 
 __all__ = ["main", "WINDOWS"]
 
-ROOT = Path(__file__).resolve().parents[2]
 LAYOUT_CHANNELS = [SCENE, TF, METRICS, CAMERA_LEFT, CAMERA_RIGHT, RENDER_IMAGE, CAMERA_LEFT_INFO,
                    CAMERA_RIGHT_INFO]
 #: window name -> channels the viewer subscribes (None: every advertised channel; []: no viewer)
@@ -113,9 +115,10 @@ def _one_run(lf: dict, params: dict, args, out: Path, label: str) -> dict:
         launch.write_text(yaml.safe_dump(lf, sort_keys=False))
         duration = args.warmup + len(WINDOWS) * (args.window + 3.0) + 5.0
         with open(out / f"sim{label}.log", "w") as log:
+            # run where launch/ is (the launch file's relative paths); the run's output beside the figures
             sim = subprocess.Popen([sys.executable, "-m", "flexsheet", "launch", str(launch), "--duration",
-                                    str(duration), "--out", str(out / f"sim{label}")], cwd=ROOT, stdout=log,
-                                   stderr=subprocess.STDOUT)
+                                    str(duration), "--out", str(out.resolve() / f"sim{label}")],
+                                   cwd=launch_dir().parent, stdout=log, stderr=subprocess.STDOUT)
         try:
             pid = _find_viz(launch)
             print(f"[bench viz] run{label}: viz pid {pid}, port {port}; warming up {args.warmup:.0f} "
@@ -183,7 +186,8 @@ def main(argv: list[str] | None = None) -> int:
                                         "scene_rate=10 --param input_rate=10 --baseline "
                                         "out/bench_viz/viz_cpu.json",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--launch", default=str(ROOT / "launch" / "sim.yaml"), help="launch file to run")
+    ap.add_argument("--launch", default=str(launch_dir() / "sim_composed.yaml"),
+                    help="wall-clock launch file to run (default launch/sim_composed.yaml)")
     ap.add_argument("--window", type=float, default=10.0, help="seconds per measurement window")
     ap.add_argument("--warmup", type=float, default=14.0, help="seconds before the first window")
     ap.add_argument("--runs", type=int, default=1, help="launches of the sim (median and spread over them)")
@@ -198,6 +202,9 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lf = yaml.safe_load(Path(args.launch).read_text())
+    if lf.get("clock") == "sim":
+        ap.error(f"{args.launch} runs on clock: sim, every node in one process, so the viz node's CPU cannot "
+                 "be told apart: give a wall-clock launch file (default launch/sim_composed.yaml)")
     if args.base_port:
         lf["base_port"] = args.base_port
     params = {}

@@ -15,6 +15,10 @@ cameras share one device clock; in free run both start frames on the same grid (
 makes the pair behave like a PTP-synchronised synchronous free run; a software trigger is served only at
 the camera's next 25 Hz tick, so triggered pairs can be 40 ms apart (use free run with fake cameras);
 ``-r`` drops GVSP packets (per thousand) to exercise the drop counters.
+
+Not the camera node's device I/O: the cameras are simulated devices that the camera bench and the GenICam
+tests start; whether Aravis sees them is asked of the stereo camera port's ``genicam`` source
+(:mod:`flexsheet.vision.camera_port`, its ``probe``), as ``flexsheet launch --check --probe`` asks it.
 """
 
 from __future__ import annotations
@@ -26,10 +30,11 @@ import shutil
 import signal
 import subprocess
 import time
+from types import SimpleNamespace
 
-from nodes.camera.genicam import DeviceInfo, list_devices
+from flexsheet.vision.camera_port import camera_source
 
-__all__ = ["FAKE_CAMERA", "ADDRESSES", "isolated", "addresses_ready", "fake_pair"]
+__all__ = ["FAKE_CAMERA", "ADDRESSES", "ENV_FLAG", "isolated", "addresses_ready", "fake_pair"]
 
 FAKE_CAMERA = "arv-fake-gv-camera-0.8"
 ADDRESSES = ("127.0.0.1", "127.0.0.2")
@@ -80,9 +85,10 @@ def isolated(cmd: list[str]) -> list[str]:
 def fake_pair(serials=("FSLEFT01", "FSRIGHT01"), addresses=ADDRESSES, lost_permille=(0, 0),
               timeout_s: float = 10.0):
     """Start two fake cameras (serials on ``addresses``; ``lost_permille``: GVSP packets dropped per
-    thousand, per camera) and wait until Aravis discovers both; yields their :class:`DeviceInfo` list.
-    Stops both on exit. Raises ``RuntimeError`` with the cameras' output when they do not come up
-    (the usual cause: an address not assigned to an interface here — use :func:`isolated`)."""
+    thousand, per camera) and wait until Aravis discovers both (the ``genicam`` source's probe finds both
+    serials); yields the serials. Stops both on exit. Raises ``RuntimeError`` with the cameras' output when
+    they do not come up (the usual cause: an address not assigned to an interface here — use
+    :func:`isolated`)."""
     if shutil.which(FAKE_CAMERA) is None:
         raise RuntimeError(f"{FAKE_CAMERA} not found: apt install aravis-tools")
     procs = []
@@ -94,20 +100,21 @@ def fake_pair(serials=("FSLEFT01", "FSRIGHT01"), addresses=ADDRESSES, lost_permi
             procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                           preexec_fn=_die_with_parent))
         deadline = time.monotonic() + timeout_s
-        found: list[DeviceInfo] = []
+        genicam = camera_source("genicam")
+        missing: list[str] = []
         while time.monotonic() < deadline:
             dead = [p for p in procs if p.poll() is not None]
             if dead:
                 out = " | ".join((p.stdout.read() or "").strip() for p in dead)
                 raise RuntimeError(f"fake camera exited ({' '.join(dead[0].args)}): {out}")
-            found = [d for d in list_devices() if d.serial in serials]
-            if len(found) == len(serials):
+            missing = genicam.probe(SimpleNamespace(left_id=serials[0], right_id=serials[1]))
+            if not missing:
                 break
             time.sleep(0.2)
         else:
-            raise RuntimeError(f"fake cameras {serials} on {addresses} not discovered in {timeout_s} s "
-                               f"(found {[d.serial for d in found]})")
-        yield found
+            raise RuntimeError(f"fake cameras {serials} on {addresses} not discovered in {timeout_s} s: "
+                               + "; ".join(missing))
+        yield list(serials)
     finally:
         for p in procs:
             if p.poll() is None:
