@@ -5,7 +5,10 @@
   ``display``, ``twin`` or any algorithm package, and only its ``zmq/`` package imports zmq;
 - node types are entry points (``flexsheet.nodes``): no file of ``flexsheet/`` names a ``nodes.…:Class``;
 - ``flexsheet/model/`` is pure: no transport (zmq, asyncio, msgpack, pymodbus), nothing above it;
-- a node (``nodes/X/``) imports only ``flexsheet.*``, ``messages`` and ``nodes.X`` itself;
+- a node (``nodes/X/``) imports only ``flexsheet.*``, ``messages`` and ``nodes.X`` itself; only the twin's own
+  nodes (``nodes/world/``, ``nodes/arm_controller_sim/``) import ``flexsheet.twin``;
+- no bench lives in ``nodes/``: no file there is named ``*bench*`` and no ``flexsheet.benches`` entry point
+  names a module there (benches are ``flexsheet/benches/``, under the library's rules);
 - no import cycle between folders (the packages of ``flexsheet/``, ``messages``, each node), nor between the
   modules inside a folder (imports under ``if TYPE_CHECKING:`` are not run and do not count);
 - no re-export: a module's ``__all__`` names only what it defines; no ``_private`` name is imported from
@@ -129,21 +132,78 @@ def test_nodes_import_only_flexsheet_messages_and_themselves():
 
 #: the nodes that are devices' adapters (the world and the arm controller are the twin's own nodes)
 DEVICE_NODES = ("camera", "head_camera", "triangulator", "planner", "arm_bridge", "fem", "renderer", "viz")
+#: the twin's own nodes: they play the simulated world and the arm controllers, so they may import the twin
+TWIN_NODES = ("world", "arm_controller_sim")
+#: the benches' section of pyproject.toml and its ``name = "module:attribute"`` lines
+BENCHES_SECTION = re.compile(r'^\[project\.entry-points\."flexsheet\.benches"\]\n(.*?)(?=^\[|\Z)',
+                             re.M | re.S)
+ENTRY_LINE = re.compile(r'^([A-Za-z0-9_-]+)\s*=\s*"([^"]+)"', re.M)
 
 
 def _adapter_files(name: str) -> list[Path]:
-    """A node's adapter modules: its files but the benches (``*bench*.py``), which drive graphs of twins."""
-    return [p for p in sorted((ROOT / "nodes" / name).rglob("*.py")) if "bench" not in p.name]
+    """A node's modules (every file of ``nodes/<name>/``: no bench lives there)."""
+    return sorted((ROOT / "nodes" / name).rglob("*.py"))
 
 
-def test_device_nodes_reach_the_twin_only_through_ports():
+def _benches(toml: str) -> dict[str, str]:
+    """Name → ``"module:attribute"`` of the ``flexsheet.benches`` entry points in the text of
+    ``pyproject.toml``."""
+    section = BENCHES_SECTION.search(toml)
+    return dict(ENTRY_LINE.findall(section.group(1))) if section else {}
+
+
+def _nodes_faults(root: Path) -> list[str]:
+    """What stops ``root/nodes/`` from being adapters only: a file of a node other than the twin's own
+    (:data:`TWIN_NODES`) that imports ``flexsheet.twin``, a file named ``*bench*``, and a
+    ``flexsheet.benches`` entry point of ``root/pyproject.toml`` whose module is under ``nodes``."""
+    bad = []
+    for path in sorted((root / "nodes").rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if "bench" in path.name:
+            bad.append(f"{rel}: a bench in nodes/ (benches live in flexsheet/benches/)")
+        if rel.split("/")[1] not in TWIN_NODES:
+            bad += [f"{rel}:{line}: imports {mod}" for line, mod in _imports(path)
+                    if mod == "flexsheet.twin" or mod.startswith("flexsheet.twin.")]
+    bad += [f"pyproject.toml: bench {name} is {spec}, in nodes/ (benches live in flexsheet/benches/)"
+            for name, spec in _benches((root / "pyproject.toml").read_text()).items()
+            if spec.split(":")[0] == "nodes" or spec.startswith("nodes.")]
+    return bad
+
+
+def test_nodes_hold_no_bench_and_only_the_twins_nodes_import_the_twin():
     """A device node takes its device through a port (``flexsheet/vision/camera_port.py``,
-    ``head_camera_port.py``, ``flexsheet/arm/controller_port.py``: an entry point per source); the twin
-    provides the simulated side. No device node's adapter imports ``flexsheet.twin``."""
-    bad = [f"{p.relative_to(ROOT)}:{line}: imports {mod}" for name in DEVICE_NODES
-           for p in _adapter_files(name) for line, mod in _imports(p)
-           if mod == "flexsheet.twin" or mod.startswith("flexsheet.twin.")]
-    assert bad == [], "device nodes importing the twin (put it behind a port):\n" + "\n".join(bad)
+    ``head_camera_port.py``, ``flexsheet/arm/controller_port.py``, ``flexsheet/rendering/output_port.py``: an
+    entry point per source); the twin provides the simulated side, and only the twin's own nodes (the world,
+    the arm controller twin) import ``flexsheet.twin``. The benches are graphs and measurements built on the
+    library (``flexsheet/benches/``), never files of ``nodes/``."""
+    assert len(_benches((ROOT / "pyproject.toml").read_text())) >= 10, "the check read no bench entry point"
+    assert any(mod.startswith("flexsheet.twin") for p in _adapter_files("world") for _, mod in _imports(p)), \
+        "the check read no import of the twin"
+    bad = _nodes_faults(ROOT)
+    assert bad == [], "nodes/ holds benches or imports the twin (put it behind a port):\n" + "\n".join(bad)
+
+
+def test_the_nodes_check_sees_planted_benches_and_twin_imports(tmp_path):
+    """A device node's import of the twin (either form), a file named ``*bench*`` and a bench entry point into
+    ``nodes`` are refused; the twin's own nodes' imports of it and a bench of the library are not."""
+    files = {"nodes/camera/node.py": "from flexsheet.twin.camera import twin_renderer\n",
+             "nodes/planner/node.py": "import os\nfrom flexsheet import twin\n",
+             "nodes/world/node.py": "from flexsheet.twin.world import World\n",
+             "nodes/arm_controller_sim/node.py": "import flexsheet.twin.controller\n",
+             "nodes/viz/bench.py": "import os\n",
+             "nodes/fem/timing.py": "import os\n",
+             "pyproject.toml": '[project.entry-points."flexsheet.benches"]\n'
+                               'arm = "flexsheet.benches.arm:main"\nfem_timing = "nodes.fem.timing:main"\n\n'
+                               '[tool.x]\ny = "nodes.a:b"\n'}
+    for f, text in files.items():
+        (tmp_path / f).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / f).write_text(text)
+    assert _nodes_faults(tmp_path) == [
+        "nodes/camera/node.py:1: imports flexsheet.twin.camera",
+        "nodes/planner/node.py:2: imports flexsheet.twin",
+        "nodes/viz/bench.py: a bench in nodes/ (benches live in flexsheet/benches/)",
+        "pyproject.toml: bench fem_timing is nodes.fem.timing:main, in nodes/ (benches live in "
+        "flexsheet/benches/)"]
 
 
 def _sim_branches(source: str) -> list[int]:
