@@ -336,6 +336,9 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment stroke --out /tmp/s --seeds 0 --set triangulator.tracking_index=0.3",
         # the slow tier's test_experiments_quick
         "flexsheet experiment stroke --quick --out /tmp/stroke_quick",
+        "flexsheet experiment objects --quick --out /tmp/objects_quick",
+        "flexsheet experiment objects --draws 8 --reference --out docs/figures/objects",
+        "flexsheet experiment objects --first 3 --draws 1 --out /tmp/objects",
         "flexsheet experiment stability --graph --out docs/figures/stroke/stability",
         "flexsheet experiment stroke_model --out docs/figures/planner",
         "flexsheet experiment stroke_model --out /tmp/s --seeds 1 --display-calib "

@@ -118,6 +118,18 @@ def _arrivals(t: np.ndarray, inside: np.ndarray, ahead: np.ndarray, cos: np.ndar
     return arrivals, never, no_arrival, onsets
 
 
+def _onset_summary(onsets: list[tuple[bool, float]]) -> dict:
+    """Every landing's (sheet there in place and pose, angle deg) (:func:`_arrivals`) summed up: {n,
+    in_place_and_pose (share, None without landings), angle_deg {median, max} or None, verdict (against
+    :data:`ONSET_TARGET`)}."""
+    if not onsets:
+        return {"n": 0, "in_place_and_pose": None, "angle_deg": None, "verdict": "MISSED"}
+    share, ang = float(np.mean([o[0] for o in onsets])), [o[1] for o in onsets]
+    return {"n": len(onsets), "in_place_and_pose": share,
+            "angle_deg": {"median": float(np.median(ang)), "max": float(np.max(ang))},
+            "verdict": "met" if share >= ONSET_TARGET else "MISSED"}
+
+
 def _plans_in_force(d: dict[str, list], t: np.ndarray) -> tuple[list, np.ndarray]:
     """The ``/sheet/target`` plans by stamp and, per stamp of ``t`` (N,) s, the index of the newest at or
     before it (−1 before the first)."""
@@ -179,32 +191,25 @@ def placement(d: dict[str, list], scene) -> dict:
     On the ``/world/finger`` samples (the true fingertip, stamps s) with the true sheet's plane interpolated
     there (``/world/sheet``): the object's surface under the finger (:func:`object_surface` of ``scene``, a
     :class:`flexsheet.model.scenes.Scene`) and the signed distance of the sheet's plane from it along the
-    object's normal, + ahead (outside the object), − behind (none where the normals are more than 78° apart,
-    cos ≤ 0.2: a sheet still turning gives tens of mm along the normal). A sample touches
-    when the finger is inside the object or behind the sheet's plane with the world's ``/world/contact``
-    touching (nearest sample within :data:`MAX_GAP` s); a touch is a contiguous run of them
-    (:func:`episodes`). Samples in a yield to the head (:func:`_head_yield`) are counted in ``head_yield`` and
-    left out of ``distance_mm``, ``by_phase_mm`` and ``signed_mm``. Per landing the finger arrives at the
-    object's surface when its indentation crosses 0; the sheet is there when at most :data:`ARRIVAL_TOL`
-    behind the surface under the finger, at most :data:`PLACEMENT_P99_MM` ahead of it and within
-    :data:`ARRIVAL_ANGLE_DEG` of its tangent plane (in place and in pose). ``arrival_ms`` =
-    sheet's arrival − finger's arrival: negative, the sheet waited (from the start of its run there, at most
-    :data:`ARRIVAL_LOOKBACK` s back); positive, late; a sheet that never arrives while the finger is in the
-    object is late by the rest of that landing (and counted in ``never``). Each landing (a run with the finger
-    in the object) is judged; a touch never pushed into the object has no arrival (``no_finger_arrival``).
+    object's normal, + ahead, − behind (none where the normals are more than 78° apart). A sample touches when
+    the finger is inside the object or behind the sheet's plane with ``/world/contact`` touching (within
+    :data:`MAX_GAP` s); a touch is a contiguous run of them (:func:`episodes`). Samples in a yield to the head
+    (:func:`_head_yield`) count in ``head_yield``, not in ``distance_mm``, ``by_phase_mm``, ``signed_mm``. Per
+    landing (a run with the finger in the object) the finger arrives when its indentation crosses 0; the sheet
+    is there when within :data:`ARRIVAL_TOL` behind to :data:`PLACEMENT_P99_MM` ahead of the surface and
+    :data:`ARRIVAL_ANGLE_DEG` of its tangent plane. ``arrival_ms`` = sheet's arrival − finger's: negative, the
+    sheet waited (at most :data:`ARRIVAL_LOOKBACK` s back); positive, late (a sheet that never arrives: the
+    rest of the landing, counted in ``never``); a touch never pushed in has no arrival
+    (``no_finger_arrival``).
 
-    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``{"n"`` (the touching
-    samples judged: with a measured distance, not in a yield), ``"distance_mm"`` {p50, p99, max} of |distance|
-    (None when every sample yielded; the distance verdict is then "no verdict"), ``"distance_mm_all"`` (the
-    same over every measured touching sample), ``"head_yield"`` {n, share of the measured touching samples},
-    ``"split"`` (the judged samples farther than the target, split into additive causes: :func:`_split`),
-    ``"by_phase_mm"`` (as ``distance_mm`` per script phase of ``/world/finger``, with n), ``"signed_mm"``
-    {median, p1, p99} (None as ``distance_mm``), ``"touches"``, ``"arrivals"`` (the finger's landings on the
-    object), ``"sheet_first"`` (their share with arrival_ms ≤ 0), ``"late"``, ``"never"``,
-    ``"no_finger_arrival"``, ``"arrival_ms"`` {median, p99, max} (None without arrivals), ``"onsets"`` {n,
-    ``in_place_and_pose`` (the share of landings whose sheet was there, in place and pose, at the finger's
-    arrival; target :data:`ONSET_TARGET`), ``angle_deg`` {median, max} there}, ``"targets"``,
-    ``"verdicts"`` {distance, sheet_first, onsets}, ``"verdict"`` (MISSED if any is)}``."""
+    Returns ``{}`` without a scene, the finger, the sheet or a touching sample, else ``n`` (the judged
+    touching samples), ``distance_mm`` {p50, p99, max} of |distance| (None when every sample yielded: "no
+    verdict"), ``distance_mm_all`` (every measured touching sample), ``head_yield`` {n, share}, ``split``
+    (:func:`_split`), ``by_phase_mm``, ``signed_mm`` {median, p1, p99}, ``touches``, ``arrivals``,
+    ``sheet_first`` (their share with arrival_ms ≤ 0), ``late``, ``never``, ``no_finger_arrival``,
+    ``arrival_ms`` {median, p99, max}, ``onsets`` (:func:`_onset_summary`: every landing in place and pose at
+    the finger's arrival), ``targets``, ``verdicts`` {distance, sheet_first, onsets} and ``verdict`` (MISSED
+    if any is)."""
     fingers = sorted((m for _, m in d.get("/world/finger", []) if m.phase != "paused"),
                      key=lambda m: m.header.stamp)
     if scene is None or len(fingers) < 2:
@@ -239,11 +244,11 @@ def placement(d: dict[str, list], scene) -> dict:
     arr = np.array(arrivals) * 1e3
     first = float(np.mean(arr <= 0.0)) if arr.size else None
     dist_mm, dist_all = (_spread(e) if e.size else None), _spread(e_all)
-    onset_ok = float(np.mean([o[0] for o in onsets])) if onsets else None
+    on = _onset_summary(onsets)
     verdicts = {"distance": "no verdict" if dist_mm is None else
                 ("met" if dist_mm["p99"] <= PLACEMENT_P99_MM else "MISSED"),
                 "sheet_first": "met" if first is not None and first >= SHEET_FIRST_TARGET else "MISSED",
-                "onsets": "met" if onset_ok is not None and onset_ok >= ONSET_TARGET else "MISSED"}
+                "onsets": on.pop("verdict")}
     n_yield = int(np.sum(judged & yielded))
     return {"n": int(keep.sum()), "distance_mm": dist_mm, "distance_mm_all": dist_all,
             "head_yield": {"n": n_yield, "share": n_yield / int(judged.sum())}, "by_phase_mm": by_phase,
@@ -254,10 +259,7 @@ def placement(d: dict[str, list], scene) -> dict:
             "late": int(np.sum(arr > 0.0)), "never": never, "no_finger_arrival": no_arrival,
             "arrival_ms": ({"median": float(np.median(arr)), "p99": float(np.percentile(arr, 99)),
                             "max": float(arr.max())} if arr.size else None),
-            "onsets": {"n": len(onsets), "in_place_and_pose": onset_ok,
-                       "angle_deg": ({"median": float(np.median([o[1] for o in onsets])),
-                                      "max": float(np.max([o[1] for o in onsets]))} if onsets else None)},
-            "targets": {"distance_mm.p99": PLACEMENT_P99_MM, "sheet_first": SHEET_FIRST_TARGET,
+            "onsets": on, "targets": {"distance_mm.p99": PLACEMENT_P99_MM, "sheet_first": SHEET_FIRST_TARGET,
                         "arrival_tol_mm": ARRIVAL_TOL * 1e3, "arrival_angle_deg": ARRIVAL_ANGLE_DEG,
                         "onsets": ONSET_TARGET},
             "verdicts": verdicts,

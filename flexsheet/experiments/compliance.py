@@ -38,7 +38,7 @@ from flexsheet.model.scenes import load_scene
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.tension import SheetMaterial, clamp_force, max_stretch_within_force, press_force
 from flexsheet.planning.pull_guard import PullGuard
-from flexsheet.planning.surface_planner import scale_depths, sheet_scene_scale
+from flexsheet.planning.scene_scale import scale_depths, sheet_scene_scale
 
 __all__ = ["WEBER", "presentable_range", "run", "main"]
 

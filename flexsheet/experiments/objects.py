@@ -37,7 +37,7 @@ from flexsheet.runtime.ports import free_port
 
 log = logging.getLogger(__name__)
 
-__all__ = ["measure_object", "bridge_holds", "main", "TARGETS"]
+__all__ = ["measure_object", "bridge_holds", "verdicts", "main", "TARGETS"]
 
 #: the issue's targets per object (units in the keys)
 TARGETS = {"felt_30_vs_cylinder": 2.0, "residual_lag_ms": 30.0, "force_within_15pct": 0.95, "saturated": 0.05,
@@ -93,7 +93,7 @@ def measure_object(summary: dict, bag: Path | None, log_text: str = "") -> dict:
     }
 
 
-def _verdicts(m: dict, cyl30: float | None) -> dict:
+def verdicts(m: dict, cyl30: float | None) -> dict:
     """Each target (:data:`TARGETS`) met / MISSED / not measured for object figures ``m``."""
     def le(v, t):
         return "not measured" if v is None else ("met" if v <= t else "MISSED")
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[objects] draw {k} ({k - args.first + 1}/{args.draws}): {desc}", flush=True)
         m = _run(f"draw{k}", path, out / f"draw{k}", args.truth_seed, launch, extra, duration)
         if "error" not in m:
-            m["verdicts"] = _verdicts(m, cyl30)
+            m["verdicts"] = verdicts(m, cyl30)
             m["description"] = desc
             missed = [t for t, v in m["verdicts"].items() if v == "MISSED"]
             print(f"[objects] draw {k}: felt 30 s {m['felt_dtheta_deg']['30']}, within 15 % "

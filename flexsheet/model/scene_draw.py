@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-__all__ = ["KINDS", "draw_scene", "write_scene", "rpy_from_rotation"]
+__all__ = ["KINDS", "draw_scene", "write_scene", "rpy_from_rotation", "random_rotation"]
 
 #: the kinds drawn, each equally likely
 KINDS = ("ellipsoid", "superquadric", "capsule", "cylinder", "dented")
@@ -48,7 +48,7 @@ def rpy_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
     return tuple(math.degrees(a) for a in (roll, pitch, yaw))  # type: ignore[return-value]
 
 
-def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A uniformly random rotation (3, 3) (a unit quaternion from four normals)."""
     q = rng.normal(size=4)
     w, x, y, z = q / np.linalg.norm(q)
@@ -99,7 +99,7 @@ def draw_scene(seed: int) -> tuple[dict, object | None]:
         raise ValueError(f"seed must be an int >= 0, got {seed!r}")
     rng = np.random.default_rng([0x5CE, int(seed)])
     kind = KINDS[int(rng.integers(len(KINDS)))]
-    R = _random_rotation(rng)
+    R = random_rotation(rng)
     mesh = None
     if kind == "cylinder":
         radius, length = float(rng.uniform(0.020, 0.040)), float(rng.uniform(0.080, 0.140))

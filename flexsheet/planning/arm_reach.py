@@ -25,7 +25,7 @@ from flexsheet.arm.bridge_config import BridgeConfig
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, ArmKinematics, IKResult, home_joints
 from flexsheet.model.sheet import clamp_poses
 
-__all__ = ["ArmReach", "SIDES", "REACH_SLACK"]
+__all__ = ["ArmReach", "SIDES", "REACH_SLACK", "rotation_power"]
 
 #: the two arms, in the order of a clamp pair (left clamp at +axis_u)
 SIDES = ("left", "right")
@@ -37,7 +37,7 @@ REACH_SLACK = 0.03
 NEAREST_STEPS = 6
 
 
-def _rotation_power(R0: np.ndarray, R1: np.ndarray, t: float) -> np.ndarray:
+def rotation_power(R0: np.ndarray, R1: np.ndarray, t: float) -> np.ndarray:
     """The rotation a fraction ``t`` ∈ [0, 1] of the way from ``R0`` (3, 3) to ``R1`` (3, 3) (geodesic)."""
     Rr = R0.T @ R1
     c = max(-1.0, min(1.0, 0.5 * (np.trace(Rr) - 1.0)))
@@ -106,6 +106,28 @@ class ArmReach:
                 return False, f"{s}:{res[s].status}"
         return True, "ok"
 
+    def screen(self, origin, R, stretch: float, size: float, R_last=None,
+               offset: tuple[float, float] = (0.0, 0.0)) -> tuple[bool, tuple, tuple, str]:
+        """The arms' IK screen of a sheet pose: ``origin`` (3,) m, ``R`` (3, 3; columns normal, axis_u,
+        axis_v; rows as nested tuples or an array), ``stretch``, side ``size`` m. Returns (ok, origin, R as
+        nested tuples, what to say): the pose itself ("" ), else the pose turned from ``R_last`` (the last
+        reachable rotation) toward it only as far as both arms reach, through the sheet's point at
+        ``offset`` (s_u, s_v) m (``"reach:nearest"``), else not ok with ``"ik:<side>:<status>"``."""
+        Ra = np.asarray(R, float)
+        o = np.asarray(origin, float)
+        ok, why = self.reachable(*clamp_poses(o, Ra[:, 0], Ra[:, 1], stretch, size))
+        if ok:
+            return True, tuple(origin), R, ""
+        if R_last is None:
+            return False, tuple(origin), R, f"ik:{why}"
+        point = o + offset[0] * Ra[:, 1] + offset[1] * Ra[:, 2]
+        near = self.nearest(point, offset, np.asarray(R_last, float), Ra, stretch, size)
+        if near is None:
+            return False, tuple(origin), R, f"ik:{why}"
+        _, on, Rn = near
+        return (True, tuple(float(x) for x in on), tuple(tuple(float(x) for x in row) for row in Rn),
+                "reach:nearest")
+
     def nearest(self, contact, offset: tuple[float, float], R_from: np.ndarray, R_to: np.ndarray,
                 stretch: float, size: float) -> tuple[float, np.ndarray, np.ndarray] | None:
         """The farthest fraction ``t`` ∈ [0, 1] of the rotation from ``R_from`` toward ``R_to`` (3, 3; columns
@@ -116,7 +138,7 @@ class ArmReach:
         seeds = dict(self.seed)
 
         def pose(t: float) -> tuple[np.ndarray, np.ndarray, bool]:
-            R = _rotation_power(R_from, R_to, t)
+            R = rotation_power(R_from, R_to, t)
             o = q - offset[0] * R[:, 1] - offset[1] * R[:, 2]
             Tl, Tr = clamp_poses(o, R[:, 0], R[:, 1], stretch, size)
             self.seed = dict(seeds)

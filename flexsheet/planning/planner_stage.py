@@ -33,8 +33,9 @@ from flexsheet.planning.keepout import KeepOut
 from flexsheet.planning.limits import ReachModel
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
+from flexsheet.planning.scene_scale import scale_depths, sheet_scene_scale
 from flexsheet.planning.shape import planner_shape
-from flexsheet.planning.surface_planner import SurfacePlanner, scale_depths, sheet_scene_scale
+from flexsheet.planning.surface_planner import SurfacePlanner
 from flexsheet.runtime.params import build
 
 __all__ = ["PlannerStage", "planner_config", "arm_bases", "fem_solves_scene", "held_sheet", "MATERIAL_RENAME",

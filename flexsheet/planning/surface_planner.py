@@ -17,20 +17,17 @@ Paper §V-A and Fig. 7, generalised:
   coordinates on the sheet.
 * **Pushing**: a fingertip inside the object (negative distance) is projected onto the surface by the same
   rule; the sheet keeps the tangent pose there and the finger depresses it, so stroking and pushing combine.
-* **Compliance**: with the object's force–depth table (:meth:`SurfacePlanner.set_force_depth`, from its own
-  FEM) the request at the contact and depth is the table's, mapped by ``stiffness_scale`` and
-  ``contrast_gain``, and matched in force. Without one, the stretch comes from
-  :func:`flexsheet.model.tension.stretch_for_stiffness` for the object's stiffness at the contact's distance
-  from the clamps and the push's depth: the one passed in (the FEM's dF/dd), else the scene's compliance model
-  at the contact (:mod:`flexsheet.planning.compliance`), else the configured value; times ``stiffness_scale``.
-  Pressed at least :data:`FORCE_DEPTH` deep with the object's press given (the FEM's force at its depth), the
-  stretch instead makes the sheet's force at this depth the object's
-  (:func:`~flexsheet.model.tension.stretch_for_force`, the force extrapolated to this depth by the object's
-  stiffness): the force–depth then follows the object's along the press, which matching the slope alone does
-  not (a sheet stiffens with depth differently from the object). The stretch is clamped to what the arms can
-  apply (status says so).
+* **Compliance**: with the object's force–depth table (:meth:`SurfacePlanner.set_force_depth`) the request
+  is the table's at the contact and depth, mapped by ``stiffness_scale`` and ``contrast_gain``, matched in
+  force. Without one, the stretch gives the object's stiffness (the FEM's dF/dd passed in, else the scene's
+  compliance model, :mod:`flexsheet.planning.compliance`, else the configured value; × ``stiffness_scale``)
+  at the contact and depth (:func:`~flexsheet.model.tension.stretch_for_stiffness`), and from
+  :data:`FORCE_DEPTH` deep with the object's press given, its force
+  (:func:`~flexsheet.model.tension.stretch_for_force`: a sheet stiffens with depth differently from the
+  object). The stretch is clamped to what the arms can apply (status says so).
 * **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
-  checked by :class:`flexsheet.planning.limits.ReachModel`.
+  checked by :class:`flexsheet.planning.limits.ReachModel` and, with an ``arm_reach``, both arms' IK
+  (:meth:`flexsheet.planning.arm_reach.ArmReach.screen`: the nearest reachable pose, ``reach:nearest``).
 
 Defined behaviour where methods fail (each has a test in ``tests/unit/planning/test_surface_planner.py``):
 
@@ -62,16 +59,12 @@ import math
 from dataclasses import replace
 from typing import NamedTuple
 
-import numpy as np
-
-from flexsheet.model.force_depth import scene_scale
 from flexsheet.model.shape_base import Shape
-from flexsheet.model.sheet import clamp_half_span, clamp_points, clamp_poses
+from flexsheet.model.sheet import clamp_half_span, clamp_points
 from flexsheet.model.tension import (
     SheetMaterial,
     TensionResult,
     max_stretch_within_force,
-    press_force,
     stiffness,
     stretch_for_force,
     stretch_for_stiffness,
@@ -94,28 +87,12 @@ from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
 
-__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "SurfacePlanner", "scale_depths", "sheet_scene_scale"]
+__all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "SurfacePlanner"]
 
 #: the table's force is matched no shallower than this (m): at 0 the contact law's force is 0
 TABLE_MIN_DEPTH = 0.0005
 #: from this push depth (m) on, a given object press is matched in force (module doc); shallower, in stiffness
 FORCE_DEPTH = 0.002
-
-
-def scale_depths(stroke_depth: float) -> tuple[float, float]:
-    """(lo, hi) m: the depths a scene's one scale is fitted over, :data:`FORCE_DEPTH` to twice its stroke
-    depth."""
-    return FORCE_DEPTH, 2.0 * float(stroke_depth)
-
-
-def sheet_scene_scale(table, mat: SheetMaterial, max_stretch: float, stroke_depth: float, gain: float = 1.0):
-    """The scene's one scale (:func:`flexsheet.model.force_depth.scene_scale`) for the sheet ``mat`` at its
-    centre: its force at ``mat.min_stretch`` and at ``max_stretch`` bound every mapped force of ``table`` over
-    :func:`scale_depths` of ``stroke_depth`` m, with contrast gain ``gain``. Raises ``ValueError`` as
-    ``scene_scale``."""
-    lo, hi = scale_depths(stroke_depth)
-    return scene_scale(table, lambda d: press_force(mat.min_stretch, mat, 0.0, d),
-                       lambda d: press_force(max_stretch, mat, 0.0, d), lo, hi, gain)
 
 
 class _Sample(NamedTuple):
@@ -285,8 +262,8 @@ class SurfacePlanner:
         the push: fingertip sample ``p`` (3,) m at ``t`` s is planned as :meth:`update` plans it (the request
         at its contact and depth, at the held contact's offset on the sheet), and the stretch moves toward
         that at no more than :meth:`hold_stretch_rate`, the sheet at rest. A refused sample, an unreachable
-        stretch or no
-        plan yet: :meth:`hold` (``None`` before the first plan). Never raises for bad samples."""
+        stretch or no plan yet: :meth:`hold` (``None`` before the first plan). Never raises for bad
+        samples."""
         s = self._sample(t, p, object_stiffness, now)
         L = self.last
         if L is None or not isinstance(s, _Sample):
@@ -464,10 +441,8 @@ class SurfacePlanner:
     def _limit_and_reach(self, origin: Vec, R, stretch: float, dt: float | None, status: list[str],
                          offset: tuple[float, float] = (0.0, 0.0)):
         """Rate-limit the target pose, place the clamps and screen their reach. Returns (origin, (n, u, v),
-        stretch, left, right, reach margin). With an ``arm_reach`` both clamp targets must solve the arms' IK:
-        where they do not, the sheet turns only as far toward the target as the arms reach, through the point
-        at ``offset`` (s_u, s_v) m on it (status ``reach:nearest``). An unreachable step is undone and the
-        last plan's pose held."""
+        stretch, left, right, reach margin); ``offset`` (s_u, s_v) m: the contact on the sheet (the arms' IK
+        screen turns a pose out of reach about it). An unreachable step is undone and the last pose held."""
         prev = None
         if dt is None or not self.limiter.initialised:
             self.limiter.reset(origin, R, stretch)
@@ -489,8 +464,14 @@ class SurfacePlanner:
         left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
         ok, margin = self.cfg.reach.reachable(left, right)
         if ok and self.arm_reach is not None:
-            ok, o, Rc, axes = self._arm_reach(o, Rc, axes, st, prev, offset, status)
-            left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
+            ok, o, Rc, why = self.arm_reach.screen(o, Rc, st, self.cfg.material.size,
+                                                   prev.R if prev is not None else None, offset)
+            if why:
+                status.append(why)
+            if why == "reach:nearest":
+                self.limiter.reset(o, Rc, st)
+                axes = cols(Rc)
+                left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
         if not ok:
             status.append("unreachable")
             if self.last is not None and prev is not None:
@@ -499,29 +480,6 @@ class SurfacePlanner:
                 L = self.last
                 return L.origin, (L.normal, L.axis_u, L.axis_v), L.stretch, L.left, L.right, margin
         return o, axes, st, left, right, margin
-
-    def _arm_reach(self, o: Vec, Rc, axes, st: float, prev, offset: tuple[float, float], status: list[str]):
-        """The arms' IK screen of the limited pose (:meth:`_limit_and_reach`): (ok, origin, R, axes), the
-        pose turned back toward the last one as far as the arms need (``reach:nearest``), or not ok."""
-        size = self.cfg.material.size
-        Tl, Tr = clamp_poses(o, axes[0], axes[1], st, size)
-        ok, why = self.arm_reach.reachable(Tl, Tr)
-        if ok:
-            return True, o, Rc, axes
-        if prev is None or prev.R is None:
-            status.append(f"ik:{why}")
-            return False, o, Rc, axes
-        point = axpy(offset[1], axes[2], axpy(offset[0], axes[1], o))
-        near = self.arm_reach.nearest(point, offset, np.array(prev.R, float), np.array(Rc, float), st, size)
-        if near is None:
-            status.append(f"ik:{why}")
-            return False, o, Rc, axes
-        _, on, Rn = near
-        o = tuple(float(x) for x in on)
-        Rc = tuple(tuple(float(x) for x in row) for row in Rn)
-        self.limiter.reset(o, Rc, st)
-        status.append("reach:nearest")
-        return True, o, Rc, cols(Rc)
 
 
 def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, sv: float, depth: float) -> float:

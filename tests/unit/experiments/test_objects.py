@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexsheet.experiments.objects import TARGETS, _verdicts, bridge_holds, measure_object
+from flexsheet.experiments.objects import TARGETS, bridge_holds, measure_object, verdicts
 from flexsheet.runtime.bag_write import BagWriter
 from flexsheet.runtime.codec import encode
 from messages import ArmJointState, Header
@@ -25,16 +25,16 @@ def test_an_object_is_judged_against_each_target_and_the_cylinder():
     m = measure_object(_summary(), None, "fem: ... serving the LINEAR model (build it ...)")
     assert m["felt_dtheta_deg"] == {"10": 0.15, "30": 0.2} and m["fem_model"] == "linear"
     assert m["landings"]["in_place_and_pose"] == 2 / 3 and m["bridge_holds"] == 0
-    v = _verdicts(m, cyl30=0.13)
+    v = verdicts(m, cyl30=0.13)
     assert set(v) == set(TARGETS) and all(x == "met" for x in v.values())
     bad = measure_object(_summary(felt30=0.3, within=0.9, span=1.5, lag=40.0), None)
-    v = _verdicts(bad, cyl30=0.13)                       # 0.3 > 2 × 0.13
+    v = verdicts(bad, cyl30=0.13)                       # 0.3 > 2 × 0.13
     assert {k for k, x in v.items() if x == "MISSED"} == {"felt_30_vs_cylinder", "force_within_15pct",
                                                           "span_p99_mm", "residual_lag_ms"}
-    assert _verdicts(bad, cyl30=None)["felt_30_vs_cylinder"] == "not measured"
+    assert verdicts(bad, cyl30=None)["felt_30_vs_cylinder"] == "not measured"
     empty = measure_object({}, None)
     assert empty["felt_dtheta_deg"] == {"10": None, "30": None}
-    assert _verdicts(empty, 0.13)["span_p99_mm"] == "not measured"
+    assert verdicts(empty, 0.13)["span_p99_mm"] == "not measured"
 
 
 def test_bridge_holds_count_refusals_not_a_bridge_before_its_first_target(tmp_path):

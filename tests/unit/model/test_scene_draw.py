@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexsheet.model.scene_draw import KINDS, _random_rotation, draw_scene, rpy_from_rotation, write_scene
+from flexsheet.model.scene_draw import KINDS, draw_scene, random_rotation, rpy_from_rotation, write_scene
 from flexsheet.model.scene_parts import rotation_rpy
 from flexsheet.model.scenes import load_scene
 
@@ -14,7 +14,7 @@ from flexsheet.model.scenes import load_scene
 def test_rpy_round_trips_through_the_scene_pose_convention():
     rng = np.random.default_rng(3)
     for _ in range(200):
-        R = _random_rotation(rng)
+        R = random_rotation(rng)
         assert np.allclose(R @ R.T, np.eye(3), atol=1e-12) and np.linalg.det(R) > 0.999
         assert np.allclose(rotation_rpy(rpy_from_rotation(R)), R, atol=1e-9)
     R = rotation_rpy((10.0, 90.0, 0.0))                    # gimbal lock: still the same rotation

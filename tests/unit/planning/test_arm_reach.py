@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from flexsheet.model import geometry
-from flexsheet.model.sheet import clamp_poses, sheet_rotation
 from flexsheet.model.shapes import Cylinder
-from flexsheet.planning.arm_reach import ArmReach, _rotation_power
+from flexsheet.model.sheet import clamp_poses, sheet_rotation
+from flexsheet.planning.arm_reach import ArmReach, rotation_power
 from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.surface_planner import SurfacePlanner
 
@@ -25,8 +25,8 @@ def _sheet_at(phi_deg: float) -> tuple[np.ndarray, np.ndarray]:
     """(contact (3,), R (3, 3)) of the upright cylinder's tangent plane at ``phi_deg`` around its axis."""
     phi = math.radians(phi_deg)
     n = np.array([math.cos(phi), math.sin(phi), 0.0])
-    return np.array([-R_CYL, 0.0, 0.0]) + R_CYL * n, sheet_rotation(n, np.array([-math.sin(phi), math.cos(phi),
-                                                                                   0.0]))
+    u = np.array([-math.sin(phi), math.cos(phi), 0.0])
+    return np.array([-R_CYL, 0.0, 0.0]) + R_CYL * n, sheet_rotation(n, u)
 
 
 def test_one_solve_per_target_pair():
@@ -40,11 +40,11 @@ def test_one_solve_per_target_pair():
         ArmReach({"left": geometry.LEFT_BASE})
 
 
-def test_a_rotation_power_is_the_geodesic_fraction():
+def test_arotation_power_is_the_geodesic_fraction():
     R0 = sheet_rotation(np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
     _, R1 = _sheet_at(50.0)
-    assert np.allclose(_rotation_power(R0, R1, 0.0), R0) and np.allclose(_rotation_power(R0, R1, 1.0), R1)
-    half = _rotation_power(R0, R1, 0.5)
+    assert np.allclose(rotation_power(R0, R1, 0.0), R0) and np.allclose(rotation_power(R0, R1, 1.0), R1)
+    half = rotation_power(R0, R1, 0.5)
     ang = math.degrees(math.acos(0.5 * (np.trace(R0.T @ half) - 1.0)))
     assert ang == pytest.approx(25.0, abs=1e-6)
 
@@ -61,7 +61,7 @@ def test_the_nearest_reachable_sheet_turns_as_far_as_the_arms_reach_through_the_
     assert np.allclose(o, q1, atol=1e-12)         # through the contact, at the sheet's centre
     Tl, Tr = clamp_poses(o, R[:, 0], R[:, 1], 0.04, 0.24)
     assert ArmReach(BASES).reachable(Tl, Tr)[0]
-    Rb = _rotation_power(R0, R1, t + 2.0 / 64)    # a little farther: beyond the arms (the bisection's edge)
+    Rb = rotation_power(R0, R1, t + 2.0 / 64)    # a little farther: beyond the arms (the bisection's edge)
     assert not ArmReach(BASES).reachable(*clamp_poses(q1, Rb[:, 0], Rb[:, 1], 0.04, 0.24))[0]
     assert reach.nearest(q1, (0.0, 0.0), R1, R1, 0.04, 0.24) is None   # not even the start: none
 
