@@ -69,11 +69,11 @@ else
   log "the install failed (exit $install_rc): the main job not run"
 fi
 left=$(mounts_under "$ROOT")
-python_v=$(chroot "$ROOT" /usr/bin/python3 --version 2>/dev/null || echo null)
-json "$OUT_JSON" suite="$BARE_SUITE" mirror="$BARE_MIRROR" variant=minbase debootstrap_s=$debootstrap_s \
-  install_rc=$install_rc install_s=$install_s loadavg_at_install="$load0" main_job_rc=$main_rc main_job_s=$main_s \
-  loadavg_at_main_job="$load" realtime_factor="$rtf" \
-  other_user_help_rc=$user_rc mounts_left="$left" python="$python_v" commit="$commit" cores="$(nproc)" \
+python_v=$(chroot "$ROOT" /usr/bin/python3 --version 2>/dev/null)
+json "$OUT_JSON" suite="$BARE_SUITE" mirror="$BARE_MIRROR" variant=minbase debootstrap_s:=$debootstrap_s \
+  install_rc:=$install_rc install_s:=$install_s loadavg_at_install="$load0" \
+  main_job_rc:=$main_rc main_job_s:=$main_s loadavg_at_main_job="$load" realtime_factor:="$rtf" \
+  other_user_help_rc:=$user_rc mounts_left:="$left" python="$python_v" commit="$commit" cores:="$(nproc)" \
   command="cd $CODE && bash docker/install.sh && flexsheet launch launch/sim.yaml --out out/sim" \
   date="$(date -u +%FT%TZ)" \
   note="chroot in a private mount namespace; the host's resolv.conf, local CAs and pip configuration copied in (this network's PyPI goes through a TLS proxy); install_s with a cold pip cache; realtime_factor: out/sim/sim_clock.json (simulated s per wall s); other_user_help_rc: flexsheet --help as a new user through /usr/local/bin"

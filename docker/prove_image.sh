@@ -89,7 +89,7 @@ build_s=$(($(date +%s) - t0))
 cached_steps=$(grep -c '^--> Using cache' "$WORK/build.log")
 if [ $build_rc -ne 0 ]; then
   tail -n 30 "$WORK/build.log" >&2
-  json "$OUT_JSON" build_rc=$build_rc build_s=$build_s base_source=$base_source base_s=$base_s commit="$commit" \
+  json "$OUT_JSON" build_rc:=$build_rc build_s:=$build_s base_source=$base_source base_s:=$base_s commit="$commit" \
     date="$(date -u +%FT%TZ)"
   die "the build failed (exit $build_rc, $build_s s; log $WORK/build.log); $OUT_JSON has what was measured"
 fi
@@ -143,14 +143,14 @@ tail -n 15 "$WORK/main.log"
 rtf=$(in_image cat out/sim/sim_clock.json 2>/dev/null \
       | python3 -c 'import json, sys; print(round(json.load(sys.stdin)["realtime_factor"], 3))' 2>/dev/null)
 
-json "$OUT_JSON" size_mb="$size" single_stage_size_mb="$single" build_s=$build_s cached_steps="$cached_steps" \
-  base_s=$base_s \
+json "$OUT_JSON" size_mb:="$size" single_stage_size_mb:="$single" build_s:=$build_s cached_steps:="$cached_steps" \
+  base_s:=$base_s \
   base_source=$base_source base="$FROM from $BARE_SUITE ($BARE_MIRROR), Debian's python3" \
-  user_uid="$user_uid" has_gcc=$has_gcc has_node=$has_node aravis_import=$aravis_import \
-  main_job_rc=$main_rc main_job_s=$main_s loadavg_at_main_job="$load" realtime_factor="${rtf:-null}" \
+  user_uid:="$user_uid" has_gcc:=$has_gcc has_node:=$has_node aravis_import:=$aravis_import \
+  main_job_rc:=$main_rc main_job_s:=$main_s loadavg_at_main_job="$load" realtime_factor:="${rtf:-null}" \
   main_job="flexsheet launch launch/sim.yaml --out out/sim (uid 1000, in /opt/flexsheet: launch/, README.md)" \
   builder="$(buildah --version) --storage-driver vfs --isolation chroot --layers" commit="$commit" \
-  cores="$(nproc)" date="$(date -u +%FT%TZ)" \
+  cores:="$(nproc)" date="$(date -u +%FT%TZ)" \
   note="size_mb: the runtime image's file tree, mounted, du -sb (uncompressed, 10^6 bytes); single_stage_size_mb: the build stage built alone (--target build), what one stage shipping compiler, headers and sources would weigh; build_s: the Dockerfile's build (cold when cached_steps is 0); base_s: making the FROM image"
 log "wrote $OUT_JSON"
 ok=1

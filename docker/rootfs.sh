@@ -179,7 +179,8 @@ export_source() {
   fi
 }
 
-# json FILE KEY=VALUE ...: writes a JSON object (values that parse as JSON stay numbers/booleans, others strings)
+# json FILE KEY=VALUE ... KEY:=JSON ...: writes a JSON object; KEY=VALUE a string, KEY:=JSON a number, true,
+# false or null as written (an empty JSON is null)
 json() {
   local file=$1; shift
   mkdir -p "$(dirname "$file")"
@@ -188,12 +189,9 @@ import json, sys
 out = {}
 for kv in sys.argv[2:]:
     k, v = kv.split("=", 1)
-    try:
-        out[k] = json.loads(v)
-    except ValueError:
-        out[k] = v
+    out[k.rstrip(":")] = (json.loads(v) if v.strip() else None) if k.endswith(":") else v
 with open(sys.argv[1], "w") as f:
-    json.dump(out, f, indent=1)
+    json.dump(out, f, indent=1, allow_nan=False)
     f.write("\n")
 EOF
 }
