@@ -56,7 +56,7 @@ from flexsheet.runtime.launch import substitute, substitutions
 from flexsheet.twin import registration
 from flexsheet.twin.truth import TwinTruth
 
-__all__ = ["twin_settings", "scene_settings", "run_bags", "main"]
+__all__ = ["twin_settings", "scene_settings", "run_bags", "main", "cli"]
 
 
 def twin_settings(lf=None) -> dict:
@@ -208,5 +208,16 @@ def main(out: str, lf=None, since: float | None = None) -> int:
     return 0 if any(k[:1].isdigit() for k in summary) else 1
 
 
+def cli(argv: list[str] | None = None) -> int:
+    """``python -m flexsheet.analysis.report OUT``: the report of the run whose bags are in ``OUT`` (what
+    ``flexsheet launch --out OUT`` writes after a run), written there again."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m flexsheet.analysis.report", description=cli.__doc__,
+                                 epilog="example: python -m flexsheet.analysis.report out/sim")
+    ap.add_argument("out", help="the run's output folder (its *.mcap bags; summary.json and charts go there)")
+    return main(ap.parse_args(argv).out)
+
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1]))
+    sys.exit(cli())

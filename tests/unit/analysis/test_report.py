@@ -311,3 +311,16 @@ def test_the_report_judges_the_sheet_model_where_the_run_touched_the_sheet(monke
     with pytest.raises(ValueError, match="weights"):
         reg.contacts_model_error(truth, sheet, uv, [1, 2, 3])
 
+
+
+def test_the_module_command_teaches_with_help_and_says_when_a_folder_has_no_bag(tmp_path, capsys):
+    import pytest
+
+    from flexsheet.analysis.report import cli
+
+    with pytest.raises(SystemExit) as e:
+        cli(["--help"])
+    assert e.value.code == 0
+    assert "example: python -m flexsheet.analysis.report out/sim" in capsys.readouterr().out
+    assert cli([str(tmp_path)]) == 1
+    assert f"[report] no bag in {tmp_path}" in capsys.readouterr().out
