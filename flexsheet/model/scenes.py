@@ -227,15 +227,20 @@ class Scene(BaseModel):
             n.append(ni)
         return np.asarray(q, dtype=float), np.asarray(n, dtype=float)
 
+    def mesh_corner_normals(self) -> np.ndarray:
+        """Per-face corner normals (M, 3, 3) of a mesh scene's :meth:`trimesh`, computed once
+        (:func:`flexsheet.model.scene_surface.corner_normals`): what :meth:`surface_point` interpolates."""
+        if self._cnormals is None:
+            self._cnormals = corner_normals(self.trimesh())
+        return self._cnormals
+
     def _mesh_closest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         import trimesh
 
         m = self.trimesh()
         q, _, tri = trimesh.proximity.closest_point(m, p)
-        if self._cnormals is None:
-            self._cnormals = corner_normals(m)
         bary = trimesh.triangles.points_to_barycentric(m.triangles[tri], q)
-        n = np.einsum("ij,ijk->ik", bary, self._cnormals[tri])
+        n = np.einsum("ij,ijk->ik", bary, self.mesh_corner_normals()[tri])
         return q, n / np.linalg.norm(n, axis=1, keepdims=True)
 
     # ------------------------------------------------------------------ FEM helpers

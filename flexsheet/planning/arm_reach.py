@@ -4,9 +4,10 @@
 their seeds (each arm's last solution). :meth:`ArmReach.solve` solves both clamp targets and keeps the
 result of the last pair asked, so the planner's reach check and the pull guard
 (:class:`~flexsheet.planning.pull_guard.PullGuard`) that follows it on the same plan share one solve per arm.
-A target pair is *reachable* when both solve within the joint limits, off singularities and without a
-branch jump from the last solution: what each bridge checks before it moves
-(:mod:`flexsheet.arm.tracking`).
+A target pair is *reachable* when both solve within the joint limits (the bridges' own, less
+:data:`REACH_SLACK`) and off singularities, as each bridge checks before it moves
+(:mod:`flexsheet.arm.tracking`; a branch jump the bridges judge from their measured joints, see
+:class:`ArmReach`).
 
 :meth:`ArmReach.nearest` answers "where no pose presents the object": from a reachable sheet pose toward a
 wanted one, the farthest reachable rotation on the way (bisection on the rotation's angle), with the sheet

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexsheet.model.scene_surface import corner_normals
 from flexsheet.model.shape_base import Shape
 from flexsheet.model.shapes import MeshShape
 from flexsheet.model.vec import Vec, dot, norm, sub
@@ -36,7 +35,6 @@ class SmoothMeshShape(MeshShape):
     def __init__(self, scene) -> None:
         super().__init__(scene.trimesh())
         self.scene = scene
-        self._corner_normals = corner_normals(self.mesh)
 
     def _ray_exit(self, s: Vec, w: Vec) -> tuple[Vec, Vec]:
         """Exit point (3,) m of the ray from ``s`` (inside) along unit ``w``, and the smooth normal (3,)
@@ -47,7 +45,7 @@ class SmoothMeshShape(MeshShape):
             return Shape._ray_exit(self, s, w)          # Newton on the smooth closest point
         k = int(np.argmax((loc - np.asarray(s)) @ np.asarray(w)))
         t = int(tri[k])
-        n = _barycentric(self.mesh.triangles[t], loc[k]) @ self._corner_normals[t]
+        n = _barycentric(self.mesh.triangles[t], loc[k]) @ self.scene.mesh_corner_normals()[t]
         n /= np.linalg.norm(n)
         return tuple(float(x) for x in loc[k]), tuple(float(x) for x in n)  # type: ignore[return-value]
 
