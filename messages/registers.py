@@ -160,14 +160,19 @@ def decode_u32(hi, lo, name: str = "value") -> int:
 
 def encode_joints(q, scale: float = SCALE, name: str = "q") -> list[int]:
     """(6,) joint values (rad or rad/s) → 12 registers, high word first per joint. ``ValueError`` on bad
-    input."""
+    input (naming the joint, as :func:`encode_i32`)."""
     a = np.asarray(q, dtype=float) if not isinstance(q, str) else None
     if a is None or a.shape != (N_JOINTS,):
         raise ValueError(f"{name} must be a ({N_JOINTS},) vector, got {q!r}")
-    regs: list[int] = []
-    for k in range(N_JOINTS):
-        regs.extend(encode_i32(a[k], scale, f"{name}[J{k + 1}]"))
-    return regs
+    with np.errstate(all="ignore"):
+        n = np.rint(a / scale)        # half to even, as round(): the same integers, the vector at once
+    if not (np.isfinite(n).all() and (n >= INT32_MIN).all() and (n <= INT32_MAX).all()):
+        regs: list[int] = []
+        for k in range(N_JOINTS):     # the first bad joint, named
+            regs.extend(encode_i32(a[k], scale, f"{name}[J{k + 1}]"))
+        return regs
+    w = n.astype(np.int64).astype(np.uint32)
+    return np.column_stack([w >> 16, w & 0xFFFF]).ravel().tolist()
 
 
 def _register_list(regs, what: str) -> list:
@@ -182,6 +187,9 @@ def decode_joints(regs: Sequence[int], scale: float = SCALE, name: str = "q") ->
     regs = _register_list(regs, name)
     if len(regs) != 2 * N_JOINTS:
         raise ValueError(f"{name} needs {2 * N_JOINTS} registers, got {len(regs)}")
+    if all(type(r) is int and 0 <= r <= 0xFFFF for r in regs):
+        w = np.array(regs, dtype=np.uint32).reshape(N_JOINTS, 2)
+        return ((w[:, 0] << 16) | w[:, 1]).astype(np.int32).astype(float) * scale
     return np.array([decode_i32(regs[2 * k], regs[2 * k + 1], scale, f"{name}[J{k + 1}]")
                      for k in range(N_JOINTS)])
 

@@ -14,9 +14,10 @@ control over UDP (:mod:`.mxt_link`).
 5. hand a :class:`CycleReport` to ``on_cycle`` (the node publishes it); ``link.after_cycle()``.
 
 The loop is the only writer. A new target mid-period (:meth:`ArmStream.refresh`) only marks the period
-dirty and wakes the loop; the loop then redoes this period's step toward the new goal from the limiter's
-snapshot (so one period's motion is still one period's step) and sends it, when the link allows a second
-write per period (Modbus: yes; MXT: no, exactly one packet per controller cycle).
+dirty and wakes the loop; the loop then, before anything else (a due cycle's read included), redoes this
+period's step toward the new goal from the limiter's snapshot (so one period's motion is still one period's
+step) and sends it, when the link allows a second write per period (Modbus: yes; MXT: no, exactly one packet
+per controller cycle).
 
 Pacing: on absolute deadlines ``period`` apart (an overrun restarts the schedule, no burst), or earlier when
 the link says the controller is ready for the next command (:meth:`ControllerLink.ready_time`: MXT sends its
@@ -346,11 +347,13 @@ class ArmStream:
             ready = self.link.ready_time() if self.link.connected else None
             due = nxt if ready is None else min(nxt, ready)
             now = time.monotonic()
+            if self._dirty:
+                # a new goal: its command leaves now, before this period's read (due or not), so that a loop
+                # busy with other handlers does not hold it for a read's round trip
+                await self._rewrite()
+                continue
             if now < due:
-                if self._dirty:
-                    await self._rewrite()
-                else:
-                    await self._wait(due)
+                await self._wait(due)
                 continue
             self._dirty = False
             if now - due > self.period:

@@ -365,6 +365,11 @@ def container_from_launch(lf, name: str, host: str | None = None, out: str | Non
                      sim_until=sim_until if live else None, sim_file=sim_file, rtf=lf.rtf if live else None)
 
 
+#: a file name: the container runs under :mod:`cProfile` and writes its stats there (``flexsheet bench sim
+#: --profile``); the loop's thread only, which on ``clock: sim`` runs every handler
+PROFILE_ENV = "FLEXSHEET_PROFILE"
+
+
 def run_container(launch: str, name: str, host: str | None = None, out: str | None = None,
                   overrides: dict[str, dict[str, Any]] | None = None, sim_until: float | None = None) -> int:
     """``flexsheet run --container NAME --launch FILE``: run that container in this process; returns the exit
@@ -377,4 +382,13 @@ def run_container(launch: str, name: str, host: str | None = None, out: str | No
     except LaunchError as exc:
         print(f"flexsheet run --container {name}: configuration error: {exc}", file=sys.stderr)
         return EXIT_CONFIG
-    return asyncio.run(c.run())
+    profile = os.environ.get(PROFILE_ENV)
+    if not profile:
+        return asyncio.run(c.run())
+    import cProfile
+
+    prof = cProfile.Profile(time.thread_time)  # CPU, not wall: a wait costs nothing
+    try:
+        return prof.runcall(asyncio.run, c.run())
+    finally:
+        prof.dump_stats(profile)

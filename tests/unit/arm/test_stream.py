@@ -68,3 +68,79 @@ def test_two_arms_each_waiting_for_the_other_step_together():
             t.span.peer_waiting = True                            # the partner waits for this arm: step
     assert t.span.waits == waits and not t.span.waiting
     assert np.linalg.norm(kl.fk(lim.c)[:3, 3] - T[:3, 3]) < 1e-4
+
+
+class _LogLink:
+    """A Modbus-like link (a second write per period allowed) that logs its calls in order; a read takes
+    ``read_s`` wall seconds (a round trip on a busy loop)."""
+
+    name = "log"
+    rewrite_ok = True
+
+    def __init__(self, q0, read_s):
+        from flexsheet.arm.stream import Verdict
+        from messages import registers as reg
+        self.connected, self.on_ready, self.calls, self.read_s = True, None, [], read_s
+        self.state = reg.ControllerState(reg.ST_ENABLED, 0, 0, 0, q0, np.zeros(6), 0, q0)
+        self.verdict = Verdict(True)
+
+    async def open(self):
+        return True
+
+    async def read(self):
+        import asyncio
+        self.calls.append("read")
+        await asyncio.sleep(self.read_s)
+        return self.state
+
+    def supervise(self, st):
+        return self.verdict
+
+    async def send(self, cmd, rewrite=False):
+        self.calls.append("rewrite" if rewrite else "send")
+        return True
+
+    async def keepalive(self):
+        pass
+
+    async def after_cycle(self):
+        pass
+
+    def ready_time(self):
+        return None
+
+    def next_deadline(self, deadline, t_start, period):
+        return deadline + period
+
+    async def close(self, end=False):
+        pass
+
+    def counters(self):
+        return {}
+
+
+def test_a_new_goal_leaves_before_the_next_cycles_read_even_when_that_cycle_is_due():
+    """The wall-clock loop, its next cycle already overdue (a loop busy with other handlers) when a new goal
+    arrives: the goal's command is the next thing sent (a rewrite of this period's step), not held behind the
+    due cycle's read round trip; and the cycle then runs as scheduled."""
+    import asyncio
+    import time
+
+    kl, t, peer, lim, stream, T, period = _shift_toward_partner(lambda: time.time())
+    link = _LogLink(lim.c.copy(), read_s=0.004)
+    stream.link = link
+
+    async def scenario():
+        task = asyncio.get_running_loop().create_task(stream.run(n_cycles=3))
+        while link.calls.count("send") < 1:                  # the first cycle ran: a snapshot exists
+            await asyncio.sleep(0.0005)
+        time.sleep(2 * period)                     # the loop is busy elsewhere: the next cycle is due
+        t.set_target(T, time.time(), time.time())
+        assert await stream.refresh()
+        n = len(link.calls)
+        await task
+        return link.calls[n:]
+    after = asyncio.run(scenario())
+    assert after[0] == "rewrite", after                      # the new goal's command went first
+    assert after[1:3] == ["read", "send"]                    # then the due cycle, read before its send
+    assert stream.refreshes == 1

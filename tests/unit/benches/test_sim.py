@@ -33,3 +33,27 @@ def test_the_budgets_share_one_core_at_the_target_speed():
 def test_files_that_are_not_a_sim_launchs_are_named(clock, match):
     with pytest.raises(ValueError, match=match):
         cost_per_sim_s(clock)
+
+
+def _busy(n):
+    return sum(i * i for i in range(n))
+
+
+def test_the_profile_ranks_a_known_hot_function_per_simulated_second(tmp_path):
+    """A stats file of a run that called a known function 30 times: it is named with its file and line, its
+    calls counted, its own time divided by the simulated span; a span that is not > 0 is refused."""
+    import cProfile
+
+    from flexsheet.benches.sim_profile import hottest
+    prof = cProfile.Profile()
+    prof.runcall(lambda: [_busy(20000) for _ in range(30)])
+    prof.dump_stats(tmp_path / "p.pstats")
+    h1, h10 = hottest(tmp_path / "p.pstats", 1.0), hottest(tmp_path / "p.pstats", 10.0)
+    row = next(r for r in h1["functions"] if r["function"] == "_busy")
+    assert row["where"].startswith("tests/unit/benches/test_sim.py:") and row["calls"] == 30
+    row10 = next(r for r in h10["functions"] if r["function"] == "_busy")
+    assert row10["cumulative"] == pytest.approx(row["cumulative"] / 10.0, rel=0.02, abs=2e-4)
+    assert any(f["file"] == "tests/unit/benches/test_sim.py" for f in h1["files"])
+    assert h1["total_own"] >= row["own"] > 0.0
+    with pytest.raises(ValueError, match="sim_s must be > 0"):
+        hottest(tmp_path / "p.pstats", 0.0)

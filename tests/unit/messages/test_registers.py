@@ -55,3 +55,24 @@ def test_command_word_and_input_image_checks():
     with pytest.raises(ValueError, match="needs 12"):
         reg.decode_joints([0] * 11)
     assert reg.decode_status(reg.ST_ENABLED | reg.ST_FAULT) == ["enabled", "fault"]
+
+
+def test_joint_vectors_encode_as_each_joint_alone_ties_to_even_and_bad_joints_named():
+    """The 12-register joint vector equals the six (hi, lo) pairs of encode_i32 (ties at half a count go to
+    the even count, as Python's round), decodes back through decode_i32's arithmetic, and a joint that does
+    not fit is named."""
+    rng = np.random.default_rng(7)
+    q = np.concatenate([rng.normal(0.0, 2.0, 6), [0.5e-6, 1.5e-6, -2.5e-6, 2147.483647, -2147.483648, 0.0]])
+    for v in q.reshape(-1, 6):
+        regs = reg.encode_joints(v)
+        assert regs == [w for k in range(6) for w in reg.encode_i32(v[k])]
+        assert all(type(w) is int for w in regs)
+        np.testing.assert_array_equal(reg.decode_joints(regs),
+                                      [reg.decode_i32(regs[2 * k], regs[2 * k + 1]) for k in range(6)])
+    assert reg.encode_joints([0.5e-6, 1.5e-6, 0, 0, 0, 0])[:4] == [0, 0, 0, 2]    # 0.5 -> 0, 1.5 -> 2
+    with pytest.raises(ValueError, match=r"q\[J4\]"):
+        reg.encode_joints([0.0, 0.0, 0.0, 3000.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"q\[J2\].*finite"):
+        reg.encode_joints([0.0, np.nan, 0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"q\[J3\]\.lo"):
+        reg.decode_joints([0, 0, 0, 0, 0, 70000] + [0] * 6)
