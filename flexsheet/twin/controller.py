@@ -91,10 +91,13 @@ class ControllerCore:
         """Apply a write of ``values`` at holding ``address``; raise :class:`WriteRejected` and change nothing
         if any register is malformed, the command has undefined bits, a target pair is split, or a target is
         out of limits / too large a step."""
-        try:
-            vals = [reg.check_register(f"HR[{address + i}]", v) for i, v in enumerate(values)]
-        except ValueError as e:
-            self._reject(reg.REJ_ADDRESS, str(e))
+        if all(type(v) is int and 0 <= v <= 0xFFFF for v in values):   # the usual write: plain registers
+            vals = list(values)
+        else:
+            try:
+                vals = [reg.check_register(f"HR[{address + i}]", v) for i, v in enumerate(values)]
+            except ValueError as e:
+                self._reject(reg.REJ_ADDRESS, str(e))
         end = address + len(vals)
         if address < 0 or end > reg.HR_COUNT or not vals:
             self._reject(reg.REJ_ADDRESS, f"write {address}..{end - 1} outside holding registers "
