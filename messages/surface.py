@@ -59,10 +59,14 @@ class ArmTarget(Message):
     velocity, and the per-DOF velocity, acceleration and jerk limits (columns: centre x, y, z m; rotation
     vector rad; clamp strain), ``motion_size`` m the sheet's unstretched side, ``motion_min_duration`` s its
     least duration.
+
+    ``joints`` (6,) rad: the publisher's IK of ``pose`` for this arm (the planner solves once per plan, on the
+    bridges' registered bases); the bridge checks them (the pose, its limits, the jump, keep-out, torque)
+    instead of solving again, and solves only when they do not pass. Empty: none given, the bridge solves.
     """
 
     SCHEMA = "flexsheet/ArmTarget"
-    VERSION = 3    # v3: the sheet's motion segment
+    VERSION = 4    # v4: joints, the planner's IK
 
     arm: str = Field(pattern="^(left|right)$", description="which arm: left or right")
     pose: ndarray("float64", (4, 4), "T_display_clamp, m")
@@ -79,3 +83,5 @@ class ArmTarget(Message):
                                                                                   lambda: np.zeros((8, 7)))
     motion_size: float = Field(default=0.24, gt=0.0, description="sheet's unstretched side, m")
     motion_min_duration: float = Field(default=0.0, ge=0.0, description="the segment's least duration, s")
+    joints: ndarray("float64", (None,), "the publisher's IK of pose, rad: (6,), or empty (none)") = Field(
+        default_factory=lambda: np.zeros(0))

@@ -18,6 +18,7 @@ limits. Where IK refuses a point on the way, the arm streams to the target's IK 
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from enum import StrEnum
 
@@ -122,6 +123,8 @@ class TargetTracker:
         self.ik_status = "no_target"
         self.last_ik: IKResult | None = None
         self.refused = 0
+        self.planned_taken = 0        # targets whose publisher's IK passed the checks (not solved again)
+        self.planned_solved = 0       # targets whose publisher's IK did not: solved here
         self._history: list[tuple[float, np.ndarray]] = []   # (source stamp, goal) of the last accepted goals
         self.velocity = np.zeros(6)
         #: (6,) rad: a goal a service set (hold, home, move-to); while set, targets are not followed
@@ -199,11 +202,17 @@ class TargetTracker:
             self.goal = self.kin.check_q(q).copy()
 
     def set_target(self, T_display_clamp, source_stamp: float, now: float, q_measured=None, *,
-                   strict: bool = False, pull: float = 0.0, motion: SheetSegment | None = None) -> IKResult:
+                   strict: bool = False, pull: float = 0.0, motion: SheetSegment | None = None,
+                   q_planned=None) -> IKResult:
         """Solve IK for a new target pose (4, 4) at time ``now`` (s); returns the :class:`IKResult`. ``pull``
         N: the sheet's pull on the clamp there; a solution whose joint torques pass the arm's limits is
         refused as ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`). ``motion``: the sheet's motion
         to the target (module doc), followed once the target is accepted; None: stream to its IK goal.
+
+        ``q_planned`` (6,) rad: the publisher's IK of the pose (the planner's), checked rather than solved
+        again: taken when it puts this arm's clamp at the pose (within the IK's tolerance, one Newton step at
+        most) inside this arm's limits, not singular, and within the jump limit of the seed; otherwise IK
+        solves from the seed as without it (``planned_taken``, ``planned_solved`` count each way).
 
         Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is
         not ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with
@@ -221,7 +230,9 @@ class TargetTracker:
         if resumed:                                     # resumed after a pause, or a stream not started yet
             since = self.last_target_at if self.last_target_at is not None else self.held_since
             max_jump += float(np.max(QD_MAX)) * max(now - since, 0.0)
-        res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
+        res = self._planned(T_display_clamp, q_planned, seed, max_jump) if q_planned is not None else None
+        if res is None:
+            res = self.kin.ik(T_display_clamp, seed, max_jump=max_jump)
         if res.ok and self.keep_out is not None and self.keep_out(res.q):
             res = replace(res, ok=False, status="keep_out")      # the arm would enter the viewer's keep-out
         if res.ok and pull > 0.0:
@@ -245,6 +256,16 @@ class TargetTracker:
             if strict:
                 raise TargetRefused(res)
         return res
+
+    def _planned(self, T, q_planned, seed: np.ndarray, max_jump: float) -> IKResult | None:
+        """``q_planned`` judged as this arm's IK of ``T`` (:meth:`set_target`): the :class:`IKResult` of IK
+        seeded there when it converges at once and passes every check, else None (solve from ``seed``)."""
+        res = self.kin.ik(T, q_planned, max_jump=math.inf, max_iter=2)
+        if res.ok and float(np.max(np.abs(res.q - seed))) <= max_jump:
+            self.planned_taken += 1
+            return res
+        self.planned_solved += 1
+        return None
 
     def _fit_velocity(self, restart: bool) -> None:
         """The goal's velocity (6,) rad/s: slope of the least-squares line through the last goals over their

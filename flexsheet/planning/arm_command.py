@@ -5,8 +5,9 @@ The one owner of the two arms' motion on the planner's side. For each :class:`~f
 the :class:`ArmCommander`
 
 - takes both clamp targets' IK (:class:`~flexsheet.planning.pull_guard.PullGuard`, from the planner's
-  :class:`~flexsheet.planning.arm_reach.ArmReach`: one solve per arm and plan) and caps the next plans'
-  clamp force at ``pull_margin`` × the arms' torque-limited pull there;
+  :class:`~flexsheet.planning.arm_reach.ArmReach`: one solve per arm and plan), sends it with the targets
+  (the bridges check it rather than solve again) and caps the next plans' clamp force at ``pull_margin`` ×
+  the arms' torque-limited pull there;
 - shapes the sheet's motion from where it is to the plan (:class:`flexsheet.arm.sheet_motion.SheetShaper`),
   within both arms' joint rates (:class:`~flexsheet.arm.sheet_motion.JointRates` at ``speed_scale`` × the
   URDF's joint speeds and ``accel_scale`` × that per second: the bridges' own scales), and at the plan's own
@@ -43,14 +44,16 @@ ACCEL_SCALE = BridgeConfig.accel_scale
 
 @dataclass(frozen=True)
 class ArmCommand:
-    """One plan's command to both arms. ``left``/``right``: clamp poses (4, 4), display frame; ``pull`` N: the
-    sheet's clamp force at the plan's stretch; ``motion``: :class:`flexsheet.arm.sheet_motion.SheetSegment`
-    fields for :class:`messages.ArmTarget` (``{}`` when the motion could not be shaped: the bridges then
-    stream to the goal joint by joint); ``say``: a line to log (a new pull limit) or ''; ``warn``: a warning
-    to log (the motion's first failure) or ''."""
+    """One plan's command to both arms. ``left``/``right``: clamp poses (4, 4), display frame; ``joints``:
+    {side: (6,) rad IK of that pose, or an empty array where it did not solve} for the bridges to check
+    instead of solving; ``pull`` N: the sheet's clamp force at the plan's stretch; ``motion``:
+    :class:`flexsheet.arm.sheet_motion.SheetSegment` fields for :class:`messages.ArmTarget` (``{}`` when the
+    motion could not be shaped: the bridges then stream to the goal joint by joint); ``say``: a line to log
+    (a new pull limit) or ''; ``warn``: a warning to log (the motion's first failure) or ''."""
 
     left: np.ndarray
     right: np.ndarray
+    joints: dict
     pull: float
     motion: dict
     say: str = ""
@@ -91,7 +94,8 @@ class ArmCommander:
         limit, said = self._cap_pull(Tl, Tr)                  # for the next plans, at these targets
         motion, failed = self._motion(plan, now, limits, held)
         pull = clamp_force(plan.stretch, self.material)
-        return ArmCommand(Tl, Tr, pull, motion, said, failed), limit
+        joints = {s: (np.zeros(0) if q is None else q) for s, q in self.pull_guard.solved.items()}
+        return ArmCommand(Tl, Tr, joints, pull, motion, said, failed), limit
 
     def _cap_pull(self, T_left: np.ndarray, T_right: np.ndarray) -> tuple[float | None, str]:
         """``pull_margin`` × the arms' torque-limited pull at these targets, and a line when the limiting

@@ -38,6 +38,8 @@ class PullGuard:
         self.kin = self.reach.kin
         self.pull = {s: math.inf for s in self.kin}
         self.joint = {s: 0 for s in self.kin}
+        #: side -> the last targets' IK solution (6,) rad, or None where it did not solve
+        self.solved: dict[str, np.ndarray | None] = {s: None for s in self.kin}
 
     @property
     def seed(self) -> dict:
@@ -49,6 +51,7 @@ class PullGuard:
         arm whose target IK does not solve keeps its last figure (its bridge refuses that target anyway). None
         while no arm's limit is known (no joint loaded)."""
         for side, res in self.reach.solve(T_left, T_right).items():
+            self.solved[side] = res.q if res.ok else None
             if res.ok:
                 self.pull[side], self.joint[side] = max_pull(self.kin[side], res.q)
         f = min(self.pull.values())

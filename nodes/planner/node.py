@@ -241,5 +241,6 @@ class PlannerNode(Node):
             self.log.warning("%s", cmd.warn)
         for pub, arm, pose in ((self.pub_left, "left", cmd.left), (self.pub_right, "right", cmd.right)):
             pub.publish(ArmTarget(header=pub.header("display", st.stamp), arm=arm, pose=pose, pull=cmd.pull,
-                                  source_stamp=float(source_stamp), status=plan.status, **cmd.motion))
+                                  source_stamp=float(source_stamp), status=plan.status,
+                                  joints=cmd.joints[arm], **cmd.motion))
 

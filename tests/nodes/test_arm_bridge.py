@@ -459,3 +459,32 @@ def test_the_arm_bridge_and_camera_params_refuse_an_uninstalled_source_with_its_
                                               r"files, genicam, sim"):
         CameraParams(source="webcam")
     assert CameraParams(source="files").source == "files"
+
+
+def test_the_planners_joints_are_taken_when_right_and_a_malformed_joints_field_is_refused_by_name():
+    """A target carrying the planner's IK (``ArmTarget.joints``) is taken without solving again (counted);
+    joints of the wrong length are refused naming the field, and the arm keeps its goal."""
+    from flexsheet.arm.kinematics import ArmKinematics
+    from flexsheet.model.geometry import LEFT_BASE
+
+    async def scenario():
+        twin = await start_twin("left")
+        try:
+            async with NodeHarness(ArmBridgeNode, params={"arm": "left", "port": twin.port}, name="bj") as h:
+                while h.node.tracker.goal is None:
+                    await asyncio.sleep(0.01)
+                good = target("left", 0.02)
+                q = ArmKinematics("left", LEFT_BASE).ik(good.pose, h.node.tracker.goal).q
+                h.inject(topics.ARM_LEFT_TARGET, good.model_copy(update={"joints": q}))
+                await h.settle(0.1)
+                assert h.node.tracker.planned_taken == 1 and h.node.tracker.planned_solved == 0
+                assert np.abs(h.node.tracker.goal - q).max() < 1e-7
+                bad = target("left", 0.04, stamp=2.0).model_copy(update={"joints": np.zeros(3)})
+                h.inject(topics.ARM_LEFT_TARGET, bad)
+                await h.settle(0.1)
+                assert h.rejected(topics.ARM_LEFT_TARGET) == 1
+                assert "ArmTarget.joints" in h.node.last_rejection
+                assert np.abs(h.node.tracker.goal - q).max() < 1e-7 and h.node.tracker.source_stamp == 1.0
+        finally:
+            await twin.stop()
+    asyncio.run(scenario())

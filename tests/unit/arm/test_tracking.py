@@ -188,3 +188,32 @@ def test_on_the_motion_the_span_guard_keeps_the_motions_own_span_within_5_mm():
     tr.motion = seg
     assert tr.span_worse(q_at(0.0055), q_at(0.006), at=t)          # 6 mm short and getting shorter: waits
     assert not tr.span_worse(q_at(-0.020), q_at(-0.019), at=t)     # 20 mm over, stepping back: goes
+
+
+def test_the_planners_joints_are_checked_not_solved_and_refused_ones_are_solved_here():
+    """A target with the publisher's IK: taken as it is when it puts the clamp at the pose (the same goal as
+    solving from the seed, with at most one Newton step instead of a solve); joints of another pose, outside
+    the limits, or of a branch beyond the jump limit are not taken: IK solves from the seed, as without them,
+    and a branch jump is still refused."""
+    kin = ArmKinematics("left", LEFT_BASE)
+    q0 = home_joints("left")
+    q1 = q0 + np.array([0.05, -0.04, 0.03, 0.02, -0.05, 0.04])
+    T1 = kin.fk(q1)
+    solved = TargetTracker(kin, max_jump=0.5)
+    solved.seed(q0)
+    ref = solved.set_target(T1, 1.0, now=0.0)
+    assert ref.ok and ref.iterations > 2                  # a solve from the seed takes several iterations
+    tr = TargetTracker(kin, max_jump=0.5)
+    tr.seed(q0)
+    res = tr.set_target(T1, 1.0, now=0.0, q_planned=q1)
+    assert res.ok and res.iterations <= 2 and (tr.planned_taken, tr.planned_solved) == (1, 0)
+    assert np.abs(tr.goal - ref.q).max() < 1e-7            # the same goal
+    T2 = kin.fk(q1 + 0.02)
+    res = tr.set_target(T2, 2.0, now=0.01, q_planned=q1)    # joints of another pose: solved here
+    assert res.ok and np.allclose(kin.fk(tr.goal), T2, atol=1e-8) and tr.planned_solved == 1
+    outside = q1.copy()
+    outside[2] = kin.q_upper[2] + 0.1
+    assert tr.set_target(T1, 3.0, now=0.02, q_planned=outside).ok and tr.planned_solved == 2
+    far = tr.goal + np.array([0.9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    res = tr.set_target(kin.fk(far), 4.0, now=0.03, q_planned=far)   # a branch jump: refused as before
+    assert not res.ok and res.status == "jump" and tr.planned_solved == 3
