@@ -16,8 +16,9 @@ node, no camera rendering, no recorder beside them. From the stamps the nodes se
   (``RenderedFrame.header.stamp``; the renderer redraws and publishes every new input here, at most 120 Hz).
 
 Each with ``median_ms``, ``p99_ms``, ``n``, the target and the verdict; exit status 1 when a path measured
-nothing (``n`` 0), naming it. The bridges reach their controller twins over TCP (``source: tcp``), as on the
-lab's arm PCs. These are the lab's real-time figures
+nothing (``n`` 0), naming it, and 78 when the builder refuses a path's graph
+(:class:`~flexsheet.runtime.graph_builder.GraphBuilder`; nothing starts). The bridges reach their controller
+twins over TCP (``source: tcp``), as on the lab's arm PCs. These are the lab's real-time figures
 (docs/realtime.md); the simulated clock charges the declared ones (flexsheet/model/timing.py).
 """
 
@@ -35,9 +36,10 @@ import yaml
 
 from flexsheet.calibration.published_registration import published_registration
 from flexsheet.dirs import launch_dir
-from flexsheet.runtime.bus import Bus, ContainerTransport
-from flexsheet.runtime.config import NodeConfig
-from flexsheet.runtime.container import Container, Member
+from flexsheet.runtime.bus import Bus
+from flexsheet.runtime.config import EXIT_CONFIG
+from flexsheet.runtime.container import Container
+from flexsheet.runtime.graph_builder import Graph, GraphBuilder, GraphRefused, NodeTopics
 from flexsheet.runtime.node import Node
 from flexsheet.runtime.plugins import node_class
 from flexsheet.runtime.qos import QoS
@@ -132,32 +134,31 @@ def _stats(x: list[float], target: dict) -> dict:
     return out
 
 
-async def _run(seconds: float, warmup: float, names: tuple[str, ...]) -> dict:
+def bench_graph(names: tuple[str, ...]) -> Graph:
+    """The graph of one measured path: the player, the ``names`` nodes of ``launch/sim.yaml`` (their params
+    from it, the bridges on ``source: tcp``) and the sink, built on the wall clock by
+    :class:`~flexsheet.runtime.graph_builder.GraphBuilder`. Raises
+    :class:`~flexsheet.runtime.graph_builder.GraphRefused` for a graph that cannot run."""
     lf = yaml.safe_load((launch_dir() / "sim.yaml").read_text())["nodes"]
     params = {n: dict(lf[n].get("params", {})) for n in lf}
     params["renderer"].update(publish_rate=120.0, max_render_rate=120.0)
     params["ctrl_left"]["port"], params["ctrl_right"]["port"] = 15121, 15122
     params["arm_left"]["port"], params["arm_right"]["port"] = 15121, 15122
     # on the wall clock the bridges reach their controller twins over TCP, as on the lab's arm PCs
-    # (source sim is the in-process twin of a simulated clock, which a wall-clock graph refuses)
+    # (source sim is the in-process twin of a simulated clock, which the builder refuses on the wall clock)
     params["arm_left"]["source"] = params["arm_right"]["source"] = "tcp"
+    b = GraphBuilder(clock="wall", name="bench graph")
+    b.add("player", cls=_Player, topics=NodeTopics(frozenset({T.STEREO.name, T.CALIBRATION.name})))
+    for name in names:
+        b.add(name, lf[name]["type"], params[name])
+    b.add("sink", cls=_Sink, topics=NodeTopics())
+    return b.build()
+
+
+async def _run(seconds: float, warmup: float, graph: Graph) -> dict:
     bus = Bus("bench", clock=None)
     made: dict[str, Node] = {}
-
-    def member(name: str, cls, p: dict) -> Member:
-        cfg = NodeConfig(name=name, node_type=getattr(cls, "node_type", ""), endpoint="", params=p,
-                         heartbeat_period=1.0)
-
-        def make(b: Bus) -> Node:
-            made[name] = cls(cfg, transport=ContainerTransport(b, ""))
-            return made[name]
-        return Member(name, make)
-
-    members = [member("player", _Player, {})]
-    for name in names:
-        members.append(member(name, node_class(lf[name]["type"]), params[name]))
-    members.append(member("sink", _Sink, {}))
-    c = Container("bench", members, bus)
+    c = Container("bench", graph.members(made), bus)
     task = asyncio.get_running_loop().create_task(c.run(install_signals=False))
     t0 = time.monotonic()
     while not bus.ready():
@@ -190,9 +191,12 @@ RENDER_PATH = ("triangulator", "fem", "renderer")
 
 
 def measure(seconds: float, warmup: float) -> dict:
-    """Both paths (module doc), each in its own run of ``warmup`` + ``seconds`` wall seconds."""
-    arm = asyncio.run(_run(seconds, warmup, ARM_PATH))
-    ren = asyncio.run(_run(seconds, warmup, RENDER_PATH))
+    """Both paths (module doc), each in its own run of ``warmup`` + ``seconds`` wall seconds. Raises
+    :class:`~flexsheet.runtime.graph_builder.GraphRefused` before either starts when a path's graph cannot
+    run."""
+    arm_graph, render_graph = bench_graph(ARM_PATH), bench_graph(RENDER_PATH)
+    arm = asyncio.run(_run(seconds, warmup, arm_graph))
+    ren = asyncio.run(_run(seconds, warmup, render_graph))
     return {"camera_frame_to_arm_command": _stats(arm["arm"], TARGETS["camera_frame_to_arm_command"]),
             "fingertip_to_rendered_frame": _stats(ren["render"], TARGETS["fingertip_to_rendered_frame"]),
             "arm_path_hops_median_ms": arm["hops"],
@@ -215,6 +219,13 @@ def main(argv: list[str] | None = None) -> int:
                                                             "144)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
+    try:     # both paths' graphs, checked before anything is rendered or started
+        bench_graph(ARM_PATH), bench_graph(RENDER_PATH)
+    except GraphRefused as refused:
+        for line in refused.lines:
+            print(f"[bench graph] {line}", file=sys.stderr)
+        print("[bench graph] FAILED: the graph was refused; nothing started", file=sys.stderr, flush=True)
+        return EXIT_CONFIG
     print(f"[bench graph] rendering {args.frames} stereo pairs of the ideal twin ...", file=sys.stderr,
           flush=True)
     _Player.frames, _Player.calib, _Player.T_dc = _frames(args.frames)

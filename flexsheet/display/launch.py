@@ -5,6 +5,8 @@ and ``display_calib:`` sections of a launch file, the twin's registration before
 - ``display_calib: FILE`` — the display registration (``display.yaml``) the nodes take their geometry from;
   may use ``$(out)`` and ``$(launch_dir)``; handed to every node with a ``display_calib`` param.
 - ``scene: FILE`` — the scene file (``launch/scenes/*.yaml``) every node with a ``scene`` param presents.
+- the display's node types' topics and the values two of them share, for the graph builder
+  (:mod:`flexsheet.display.graph_topics`);
 - ``twin: {realism, truth_seed, registration}`` — the hidden truth every twin node draws; with
   ``registration: true`` (default) and no ``display_calib``, ``flexsheet launch`` first runs the registration
   in the twin (cached per seed) and hands its ``display.yaml`` to the estimators.
@@ -21,6 +23,7 @@ from pydantic import ConfigDict
 
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.dirs import cache_root as flexsheet_cache_root
+from flexsheet.display.graph_topics import NODE_TOPICS, SHARED_VALUES
 from flexsheet.model.scenes import load_scene
 from flexsheet.model.truth_choice import TruthChoice
 from flexsheet.runtime.console import console_logger, show_lines
@@ -213,4 +216,6 @@ EXTENSION = LaunchExtension(
     input_params=frozenset({"scene"}),
     output_params={("fem", "cache_dir"): "dir"},
     listen_params={"arm_controller_sim": ("host", "port")},
+    node_topics=NODE_TOPICS,
+    shared_values=SHARED_VALUES,
 )

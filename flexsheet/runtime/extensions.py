@@ -50,7 +50,10 @@ class LaunchExtension:
     name → reader that raises ``ValueError``/``OSError`` for an input file it cannot use; ``input_params``:
     further param names whose value is an input file that must exist (no reader); ``output_params``: (node
     type, param) → ``"file"``/``"dir"`` written by the node; ``listen_params``: node type → (host param, port
-    param)."""
+    param); ``node_topics``: node type → params → its
+    :class:`~flexsheet.runtime.graph_builder.NodeTopics` (what it publishes, what it cannot work without);
+    ``shared_values``: the :class:`~flexsheet.runtime.graph_builder.SharedValue` pairs its node types must
+    agree on (both read by :class:`~flexsheet.runtime.graph_builder.GraphBuilder`)."""
 
     name: str
     sections: tuple[LaunchSection, ...] = ()
@@ -60,6 +63,8 @@ class LaunchExtension:
     input_params: frozenset[str] = frozenset()
     output_params: dict[tuple[str, str], str] = field(default_factory=dict)
     listen_params: dict[str, tuple[str, str]] = field(default_factory=dict)
+    node_topics: dict[str, Callable[[Any], Any]] = field(default_factory=dict)
+    shared_values: tuple[Any, ...] = ()
 
 
 @functools.cache

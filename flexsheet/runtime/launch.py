@@ -209,6 +209,8 @@ class LaunchFile(BaseModel):
     shutdown_timeout: float = Field(default=3.0, gt=0.0, description="s per escalation step")
     report: str | None = Field(default=None, description="'module:function' called after the run with --out")
     security: SecuritySpec = Field(default_factory=SecuritySpec)
+    external: list[str] = Field(default_factory=list, description="topics a tool or another launch file "
+                                "feeds: the graph check asks no node of this file to publish them")
     sections: dict[str, Any] = Field(default_factory=dict, description="the top-level sections launch "
                                      "extensions add (flexsheet.runtime.extensions), validated by them")
     nodes: dict[str, NodeSpec]
@@ -358,6 +360,8 @@ def _graph_problems(lf: LaunchFile, path: Path) -> list[str]:
                          f"hosts {', '.join(hosts)}; put them on one host or use clock: wall")
         for spec in lf.nodes.values():
             spec.container = SIM_CONTAINER
+    lines += [f"{path}: key 'external': {t!r} is not a topic (/name)" for t in lf.external
+              if not t.startswith("/")]
     clash = sorted(set(lf.hosts) & set(lf.nodes))
     if lf.security.curve and clash:
         lines.append(f"{path}: key 'nodes.{clash[0]}': a node named like a host; under CURVE each has its "

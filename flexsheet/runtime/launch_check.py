@@ -26,6 +26,9 @@ same check first and starts nothing when it finds an error. What is checked:
   ``flexsheet keys generate --launch FILE``.
 
 - **containers**: a player with ``mode: lockstep`` is in a container with other nodes.
+- **graph**: the whole file's graph (every host) through
+  :meth:`~flexsheet.runtime.graph_builder.GraphBuilder.build`: each source fits its node's clock, each
+  required input has a publisher (or is ``external:``), the values two node types share agree.
 
 Warnings (printed, not failing): CURVE off on a graph whose hosts are not all loopback; a node type that
 cannot be imported on this machine for a node of another host; the nodes of one container asking for different
@@ -51,6 +54,7 @@ from pydantic import BaseModel, ValidationError
 from flexsheet.runtime.domain import domain_id, shift_params
 from flexsheet.runtime.extensions import extensions
 from flexsheet.runtime.extensions import sections as launch_sections
+from flexsheet.runtime.graph_builder import GraphBuilder, GraphRefused
 from flexsheet.runtime.launch import (
     LaunchError,
     LaunchFile,
@@ -119,6 +123,8 @@ class _Checker:
         #: the launch extensions' values for the nodes that take them (not None), as node_config hands them on
         self.graph_wide = {k: v for k, sec in launch_sections().items()
                            if (v := sec.node_value(lf.section(k), lf, out)) is not None}
+        #: each node's params as checked (overrides, substitutions, graph-wide values), for the graph check
+        self.node_params: dict[str, dict] = {}
 
     def err(self, where: str, value: Any, msg: str) -> None:
         self.res.errors.append(f"{self.lf.path}: {where} = {short_repr(value)}: {msg}")
@@ -136,6 +142,7 @@ class _Checker:
         self.check_report()
         self.check_nodes()
         self.check_containers()
+        self.check_graph()
         self.res.errors = [_one_line(x) for x in self.res.errors]
         self.res.warnings = [_one_line(x) for x in self.res.warnings]
         return self.res
@@ -293,6 +300,7 @@ class _Checker:
             # graph-wide values, as node_config fills them in; each file is checked once, by its extension
             injected = {k for k in self.graph_wide if k in model.model_fields and k not in params}
             params.update({k: self.graph_wide[k] for k in injected})
+            self.node_params[name] = dict(params)
             # a graph-wide value its extension already refused (a
             # missing scene file) is one error, not one per node
             bad = [str(self.graph_wide[k]) for k in injected
@@ -362,6 +370,19 @@ class _Checker:
                     self.warn(f"container {cname} on host {host}: its nodes ask for different {key} "
                               f"({', '.join(f'{n}={v}' for n, v in values.items())}); one process runs at "
                               f"{key} {pick(values.values())}")
+
+
+    # -------------------------------------------------------------------------------------------------- graph
+    def check_graph(self) -> None:
+        """The whole file's graph (every host) through :meth:`GraphBuilder.build`: a source that does not fit
+        the clock, a required input no node publishes, a shared value two nodes disagree on. Its type and
+        params problems are :meth:`check_nodes`' already."""
+        builder = GraphBuilder.from_launch(self.lf, lambda n: self.node_params.get(n, self.params(n)))
+        try:
+            builder.build()
+        except GraphRefused as refused:
+            self.res.errors += [f"{self.lf.path}: {p.line}" for p in refused.problems
+                                if p.kind not in ("type", "params")]
 
 
 def _one_line(text: str) -> str:

@@ -13,12 +13,14 @@ broken module breaks only its own node type.
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import Annotated
 
 from pydantic import AfterValidator
 
-__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type", "plugin", "EntryName"]
+__all__ = ["NODES_GROUP", "table", "node_types", "node_class", "unknown_node_type", "plugin", "EntryName",
+           "EntryGroup"]
 
 #: the entry-point group of the node types
 NODES_GROUP = "flexsheet.nodes"
@@ -63,14 +65,23 @@ def plugin(group: str, name: str, what: str = "entry", base: type | None = None)
     raise LookupError(f"unknown {what} {name!r} ({group}); known: {known}")
 
 
+@dataclass(frozen=True)
+class EntryGroup:
+    """The marker :func:`EntryName` leaves in its field's metadata: the entry-point ``group`` the field
+    names an entry of, and ``what`` one is called (a graph builder finds a node's sources by it)."""
+
+    group: str
+    what: str
+
+
 def EntryName(group: str, what: str) -> object:  # noqa: N802 - a type, used as one in a model's field
     """A pydantic field type: a ``str`` that names an installed entry point of ``group`` (an open set: any
     package may add one; nothing lists the names in code). A name not installed fails validation with
     ``unknown <what> 'NAME'; installed: …``. Example: ``source: EntryName("flexsheet.camera_sources",
-    "camera source") = "sim"``."""
+    "camera source") = "sim"``. The field's metadata carries an :class:`EntryGroup`."""
     def check(name: str) -> str:
         if name not in table(group):
             known = ", ".join(table(group)) or "none (is flexsheet installed: pip install -e .?)"
             raise ValueError(f"unknown {what} {name!r}; installed: {known}")
         return name
-    return Annotated[str, AfterValidator(check)]
+    return Annotated[str, AfterValidator(check), EntryGroup(group, what)]
