@@ -35,6 +35,7 @@ import pinocchio as pin
 
 from flexsheet.model.checks import check_pose
 from flexsheet.model.geometry import pose_matrix
+from flexsheet.model.vec import vnorm
 
 __all__ = ["URDF_PATH", "JOINT_NAMES", "Q_LOWER", "Q_UPPER", "QD_MAX", "DATASHEET_SPEED_DEG", "Q_HOME",
            "home_joints", "IKResult", "ArmKinematics", "clamp_joints", "outside_limits", "rotation_angle"]
@@ -117,7 +118,7 @@ class ArmKinematics:
         self.side = side
         b = np.asarray(base, dtype=float)
         if b.shape == (4,):
-            if not np.all(np.isfinite(b)):
+            if not np.isfinite(b).all():
                 raise ValueError(f"base must be finite, got {b!r}")
             self.T_display_base = pose_matrix(*b)
         else:
@@ -129,7 +130,7 @@ class ArmKinematics:
         self.T_link_tool = _FLIP_X if side == "right" else np.eye(4)
         self.q_lower = Q_LOWER.copy() if q_lower is None else np.asarray(q_lower, dtype=float).copy()
         self.q_upper = Q_UPPER.copy() if q_upper is None else np.asarray(q_upper, dtype=float).copy()
-        if self.q_lower.shape != (6,) or self.q_upper.shape != (6,) or np.any(self.q_lower >= self.q_upper):
+        if self.q_lower.shape != (6,) or self.q_upper.shape != (6,) or (self.q_lower >= self.q_upper).any():
             raise ValueError(f"q_lower/q_upper must be (6,) with lower < upper, got {self.q_lower}, "
                              f"{self.q_upper}")
         # tool offset as a pin.SE3 so IK works in the URDF chain without per-iteration matrix products
@@ -142,7 +143,7 @@ class ArmKinematics:
     def check_q(self, q) -> np.ndarray:
         """Return ``q`` as a (6,) float64 array; raise ``ValueError`` naming it if bad shape or not finite."""
         a = np.asarray(q, dtype=float)
-        if a.shape != (6,) or not np.all(np.isfinite(a)):
+        if a.shape != (6,) or not np.isfinite(a).all():
             raise ValueError(f"q must be a finite (6,) joint vector in rad, got {q!r}")
         return a
 
@@ -240,7 +241,7 @@ class ArmKinematics:
         for it in range(1, max_iter + 1):  # noqa: B007
             pin.framesForwardKinematics(model, data, q)
             err = pin.log6(data.oMf[fid].actInv(M_goal)).vector
-            if np.linalg.norm(err[:3]) <= tol_pos and np.linalg.norm(err[3:]) <= tol_rot:
+            if vnorm(err[:3]) <= tol_pos and vnorm(err[3:]) <= tol_rot:
                 break
             J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
             if it == 1 or w < 2.0 * w0:               # re-evaluate damping only near singular poses
@@ -261,8 +262,8 @@ class ArmKinematics:
         else:
             pin.framesForwardKinematics(model, data, q)
             err = pin.log6(data.oMf[fid].actInv(M_goal)).vector
-        pos_err = float(np.linalg.norm(err[:3]))
-        rot_err = float(np.linalg.norm(err[3:]))
+        pos_err = vnorm(err[:3])
+        rot_err = vnorm(err[3:])
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
         w = abs(float(np.linalg.det(J)))              # manipulability at the returned q
         converged = pos_err <= max(tol_pos, 1e-7) and rot_err <= max(tol_rot, 1e-7)

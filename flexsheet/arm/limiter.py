@@ -49,10 +49,10 @@ class StreamLimiter:
         for name, v in (("q0", q0), ("qd_max", qd_max), ("qdd_max", qdd_max), ("q_lower", q_lower),
                         ("q_upper", q_upper)):
             a = np.asarray(v, dtype=float)
-            if a.shape != (6,) or not np.all(np.isfinite(a)):
+            if a.shape != (6,) or not np.isfinite(a).all():
                 raise ValueError(f"{name} must be a finite (6,) vector, got {v!r}")
             arrs[name] = a
-        if np.any(arrs["qd_max"] <= 0) or np.any(arrs["qdd_max"] <= 0):
+        if (arrs["qd_max"] <= 0).any() or (arrs["qdd_max"] <= 0).any():
             raise ValueError("qd_max and qdd_max must be positive")
         if not margin >= 0.0:
             raise ValueError(f"margin must be >= 0 rad, got {margin!r}")
@@ -61,7 +61,7 @@ class StreamLimiter:
         self.qdd_max = arrs["qdd_max"]
         self.lo = arrs["q_lower"] + margin
         self.hi = arrs["q_upper"] - margin
-        if np.any(self.lo >= self.hi):
+        if (self.lo >= self.hi).any():
             raise ValueError("margin leaves an empty joint range")
         self.c = np.clip(arrs["q0"], self.lo, self.hi)
         self.v = np.zeros(6)
@@ -70,7 +70,7 @@ class StreamLimiter:
         """Restart from joints ``q`` (6,) rad at rest (after a reconnect: q = measured). ``ValueError`` if
         bad."""
         a = np.asarray(q, dtype=float)
-        if a.shape != (6,) or not np.all(np.isfinite(a)):
+        if a.shape != (6,) or not np.isfinite(a).all():
             raise ValueError(f"q must be a finite (6,) vector, got {q!r}")
         self.c = np.clip(a, self.lo, self.hi)
         self.v = np.zeros(6)
@@ -88,7 +88,7 @@ class StreamLimiter:
             c, v = (np.array(x, dtype=float) for x in snap)
         except (TypeError, ValueError):
             raise ValueError(f"snapshot must be a (c, v) pair of (6,) vectors, got {snap!r}") from None
-        if c.shape != (6,) or v.shape != (6,) or not (np.all(np.isfinite(c)) and np.all(np.isfinite(v))):
+        if c.shape != (6,) or v.shape != (6,) or not (np.isfinite(c).all() and np.isfinite(v).all()):
             raise ValueError(f"snapshot must be a (c, v) pair of finite (6,) vectors, got {snap!r}")
         self.c, self.v = c, v
 

@@ -46,7 +46,7 @@ def max_pull(kin, q, limits=TORQUE_LIMITS) -> tuple[float, int]:
     (inf, 0) where no joint is loaded. Raises ``ValueError`` for a bad ``q`` or limits that are not (6,)
     positive."""
     lim = np.asarray(limits, float)
-    if lim.shape != (6,) or not np.all(lim > 0.0):
+    if lim.shape != (6,) or not (lim > 0.0).all():
         raise ValueError(f"limits must be (6,) positive N·m, got {limits!r}")
     per_newton = np.abs(joint_torques(kin, q, 1.0))
     with np.errstate(divide="ignore"):

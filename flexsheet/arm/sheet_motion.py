@@ -40,6 +40,7 @@ from scipy.spatial.transform import Rotation
 from flexsheet.arm.kinematics import ArmKinematics
 from flexsheet.model import geometry
 from flexsheet.model.motion_limits import MotionLimits
+from flexsheet.model.vec import vnorm
 
 __all__ = ["per_dof", "SheetSegment", "SheetShaper", "JointRates", "MotionError", "MIN_SHARE", "DOF",
            "EXTRAPOLATE_S", "VELOCITY_PLANS", "plan_velocity", "lsq_slope"]
@@ -80,7 +81,7 @@ def per_dof(limits: MotionLimits, delta: np.ndarray, velocity=None) -> np.ndarra
     for j, sl in enumerate(_GROUPS):
         share = np.full(sl.stop - sl.start, MIN_SHARE)
         for x in (np.abs(np.asarray(delta, float)[sl]), vel[sl]):
-            n = float(np.linalg.norm(x))
+            n = vnorm(x)
             if n > 1e-12:
                 share = np.maximum(share, x / n)
         out[:, sl] = g[:, j:j + 1] * share[None, :]
@@ -121,7 +122,7 @@ class SheetSegment:
     def __post_init__(self) -> None:
         for name, shape in (("frame", (3, 3)), ("start", (3, DOF)), ("goal", (2, DOF)), ("limits", (3, DOF))):
             a = np.asarray(getattr(self, name), dtype=float)
-            if a.shape != shape or not np.all(np.isfinite(a)):
+            if a.shape != shape or not np.isfinite(a).all():
                 raise MotionError(f"SheetSegment.{name} must be a finite {shape} array, got shape {a.shape}")
             object.__setattr__(self, name, a)
         if np.abs(self.frame.T @ self.frame - np.eye(3)).max() > 1e-6 or np.linalg.det(self.frame) <= 0.0:
@@ -129,7 +130,7 @@ class SheetSegment:
         if not (math.isfinite(self.t0) and self.size > 0.0 and 0.0 <= self.min_duration < 10.0):
             raise MotionError(f"SheetSegment t0 must be finite, size > 0 and min_duration in [0, 10) s, got "
                               f"t0={self.t0!r}, size={self.size!r}, min_duration={self.min_duration!r}")
-        if np.any(self.limits <= 0.0):
+        if (self.limits <= 0.0).any():
             raise MotionError(f"SheetSegment.limits must be > 0, got {self.limits.tolist()}")
         inp = InputParameter(DOF)
         inp.current_position, inp.current_velocity, inp.current_acceleration = (r.tolist()
@@ -340,8 +341,8 @@ class JointRates:
         self.kin = {s: ArmKinematics(s, b) for s, b in bases.items()}
         self.qd_max = np.asarray(qd_max, float)
         self.qdd_max = np.asarray(qdd_max, float)
-        if (self.qd_max.shape != (6,) or self.qdd_max.shape != (6,) or np.any(self.qd_max <= 0)
-            or np.any(self.qdd_max <= 0)):
+        if (self.qd_max.shape != (6,) or self.qdd_max.shape != (6,) or (self.qd_max <= 0).any()
+            or (self.qdd_max <= 0).any()):
             raise ValueError(f"qd_max and qdd_max must be positive (6,) vectors, got {qd_max!r}, {qdd_max!r}")
         self.samples = int(samples)
         if not accel_allowance >= 1.0:

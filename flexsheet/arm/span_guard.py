@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from flexsheet.arm.kinematics import ArmKinematics
+from flexsheet.model.vec import vnorm
 
 __all__ = ["SpanGuard"]
 
@@ -57,7 +58,7 @@ class SpanGuard:
         the partner's clamp ``peer`` (3,) m (default :attr:`peer_clamp`); 0 inside."""
         peer = self.peer_clamp if peer is None else peer
         lo, hi = self.band if band is None else band
-        s = float(np.linalg.norm(self._point(q) - peer))
+        s = vnorm(self._point(q) - peer)
         return max(lo - s, s - hi, 0.0)
 
     def _point(self, q) -> np.ndarray:

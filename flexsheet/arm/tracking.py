@@ -28,6 +28,7 @@ from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, IKResult, outside_li
 from flexsheet.arm.pull_limit import max_pull
 from flexsheet.arm.sheet_motion import SheetSegment, lsq_slope
 from flexsheet.arm.span_guard import SpanGuard
+from flexsheet.model.vec import vnorm
 
 __all__ = ["TargetTracker", "TargetRefused", "BridgeStatus", "VELOCITY_GOALS", "EXTRAPOLATE_MAX_S",
            "PEER_ON_MOTION",
@@ -166,10 +167,10 @@ class TargetTracker:
                 and at is not None and guard.band is not None):
             k = 1 if self.kin.side == "left" else 0        # the partner's place in clamp_points (left, right)
             at_meas = self.motion.clamp_points(guard.peer_stamp)[k]
-            if float(np.linalg.norm(measured - at_meas)) <= PEER_ON_MOTION:
+            if vnorm(measured - at_meas) <= PEER_ON_MOTION:
                 points = self.motion.clamp_points(at)
                 theirs = points[k]
-                span = float(np.linalg.norm(points[0] - points[1]))
+                span = vnorm(points[0] - points[1])
                 return guard.worse(q_from, q_to, theirs,
                                    (max(span - SPAN_ON_MOTION, 1e-3), span + SPAN_ON_MOTION))
         return guard.worse(q_from, q_to if q_stop is None else q_stop)
@@ -209,16 +210,24 @@ class TargetTracker:
         refused as ``torque:J<k>`` (:func:`flexsheet.arm.pull_limit.max_pull`). ``motion``: the sheet's motion
         to the target (module doc), followed once the target is accepted; None: stream to its IK goal.
 
-        ``q_planned`` (6,) rad: the publisher's IK of the pose (the planner's), checked rather than solved
-        again: taken when it puts this arm's clamp at the pose (within the IK's tolerance, one Newton step at
-        most) inside this arm's limits, not singular, and within the jump limit of the seed; otherwise IK
-        solves from the seed as without it (``planned_taken``, ``planned_solved`` count each way).
+        ``q_planned`` (6,) rad: the publisher's IK of the pose (the planner's; None or empty: none), checked
+        rather than solved again: taken when it puts this arm's clamp at the pose (within the IK's tolerance,
+        one Newton step at most) inside this arm's limits, not singular, and within the jump limit of the
+        seed; otherwise IK solves from the seed as without it (``planned_taken``, ``planned_solved`` count
+        each way).
 
         Seed: the current goal, else ``q_measured``; the jump limit as the class doc says. If the result is
         not ok, the goal is unchanged, ``ik_status`` holds the reason, ``refused`` counts it and, with
         ``strict``, :class:`TargetRefused` is raised (after that bookkeeping: the hold status still shows).
-        Raises ``ValueError`` for a malformed pose (before anything changes).
+        Raises ``ValueError`` for a malformed pose or ``q_planned`` (before anything changes).
         """
+        if q_planned is not None:
+            q_planned = np.asarray(q_planned, dtype=float)
+            if q_planned.size == 0:
+                q_planned = None
+            elif q_planned.shape != (6,) or not np.isfinite(q_planned).all():
+                raise ValueError(f"joints (the publisher's IK) must be 6 finite values in rad or none, got "
+                                 f"{q_planned.tolist()}")
         seed = self.goal if self.goal is not None else q_measured
         if seed is None:
             raise ValueError("no seed: call seed(q_measured) or pass q_measured before the first target")
@@ -321,8 +330,8 @@ class TargetTracker:
                 q, w, err, manip = kin.track(T, self._motion_q, twist)
             except np.linalg.LinAlgError:
                 err = np.inf
-            if (err <= TRACK_STEP_MAX and manip >= TRACK_W_MIN and np.all(q >= kin.q_lower)
-                    and np.all(q <= kin.q_upper)):
+            if (err <= TRACK_STEP_MAX and manip >= TRACK_W_MIN and (q >= kin.q_lower).all()
+                    and (q <= kin.q_upper).all()):
                 self._motion_q = q
                 return q, w
         seed = self._motion_q if self._motion_q is not None else self.goal

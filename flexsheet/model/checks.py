@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexsheet.model.vec import vnorm
+
 __all__ = ["check_point", "check_vector", "check_unit", "check_positive", "check_rotation", "check_pose"]
 
 _I3 = np.eye(3)
@@ -29,7 +31,7 @@ def check_point(name: str, p, dim: int = 3) -> np.ndarray:
         a = np.asarray(p, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a finite ({dim},) point in m, got {p!r}") from None
-    if a.shape != (dim,) or not np.all(np.isfinite(a)):
+    if a.shape != (dim,) or not np.isfinite(a).all():
         raise ValueError(f"{name} must be a finite ({dim},) point in m, got {_short(p)}")
     return a
 
@@ -40,9 +42,9 @@ def check_vector(name: str, v, dim: int = 3, nonzero: bool = False) -> np.ndarra
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a finite ({dim},) vector, got {v!r}") from None
-    if a.shape != (dim,) or not np.all(np.isfinite(a)):
+    if a.shape != (dim,) or not np.isfinite(a).all():
         raise ValueError(f"{name} must be a finite ({dim},) vector, got {_short(v)}")
-    if nonzero and float(np.linalg.norm(a)) <= 1e-12:
+    if nonzero and vnorm(a) <= 1e-12:
         raise ValueError(f"{name} must be non-zero, got {_short(v)}")
     return a
 
@@ -51,7 +53,7 @@ def check_unit(name: str, v, tol: float | None = None) -> np.ndarray:
     """A direction (3,). With ``tol=None`` it is normalised (must be non-zero); otherwise its norm must be
     1 within ``tol``. Returns the unit vector. Raises ``ValueError`` naming ``name``."""
     a = check_vector(name, v, 3, nonzero=True)
-    n = float(np.linalg.norm(a))
+    n = vnorm(a)
     if tol is not None and abs(n - 1.0) > tol:
         raise ValueError(f"{name} must be a unit vector (|v| = 1 ± {tol:g}), got |v| = {n:.6g}")
     return a / n
@@ -74,7 +76,7 @@ def check_rotation(name: str, R, tol: float = 1e-6) -> np.ndarray:
         A = np.asarray(R, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a finite (3, 3) rotation, got {R!r}") from None
-    if A.shape != (3, 3) or not np.all(np.isfinite(A)):
+    if A.shape != (3, 3) or not np.isfinite(A).all():
         raise ValueError(f"{name} must be a finite (3, 3) rotation, got shape {A.shape}")
     err = float(np.abs(A.T @ A - _I3).max())
     if err > tol or np.linalg.det(A) <= 0.0:
@@ -92,7 +94,7 @@ def check_pose(name: str, T, tol: float = 1e-6) -> np.ndarray:
         A = np.asarray(T, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a finite (4, 4) transform, got {T!r}") from None
-    if A.shape != (4, 4) or not np.all(np.isfinite(A)):
+    if A.shape != (4, 4) or not np.isfinite(A).all():
         raise ValueError(f"{name} must be a finite (4, 4) transform, got shape {A.shape}")
     if np.abs(A[3] - (0.0, 0.0, 0.0, 1.0)).max() > tol:
         raise ValueError(f"{name} last row must be (0, 0, 0, 1), got {_short(A[3])}")

@@ -65,11 +65,11 @@ class ForceDepth:
             raise ValueError(f"normals must have the points' shape {P.shape}, got {N.shape}")
         if len(self.names) != len(P):
             raise ValueError(f"names must name every point ({len(P)}), got {len(self.names)}")
-        if d.ndim != 1 or len(d) < 2 or abs(d[0]) > 1e-12 or np.any(np.diff(d) <= 0):
+        if d.ndim != 1 or len(d) < 2 or abs(d[0]) > 1e-12 or (np.diff(d) <= 0).any():
             raise ValueError(f"depths must ascend from 0 m, got {np.round(d, 6).tolist()[:8]}")
         if F.shape != (len(P), len(d)):
             raise ValueError(f"force must be (points, depths) = {(len(P), len(d))}, got {F.shape}")
-        if not (np.all(np.isfinite(P)) and np.all(np.isfinite(N)) and np.all(np.isfinite(F))
+        if not (np.isfinite(P).all() and np.isfinite(N).all() and np.isfinite(F).all()
                 and F.min() >= 0.0):
             raise ValueError("points, normals and force must be finite, force >= 0 N")
         object.__setattr__(self, "points", P)
@@ -83,7 +83,7 @@ class ForceDepth:
         """(segment i, weight a ∈ [0, 1] of point i + 1, distance m) of contact ``q`` (3,) m projected onto
         the polyline of the points. Raises ``ValueError`` for a non-finite or mis-shaped ``q``."""
         qv = np.asarray(q, float)
-        if qv.shape != (3,) or not np.all(np.isfinite(qv)):
+        if qv.shape != (3,) or not np.isfinite(qv).all():
             raise ValueError(f"contact point must be finite (3,) m, got {q!r}")
         A, B = self.points[:-1], self.points[1:]
         AB = B - A

@@ -13,7 +13,7 @@ import math
 Vec = tuple[float, float, float]
 Mat = tuple[Vec, Vec, Vec]
 
-__all__ = ["Vec", "Mat", "add", "sub", "scale", "dot", "cross", "norm", "unit", "axpy", "finite",
+__all__ = ["Vec", "Mat", "add", "sub", "scale", "dot", "cross", "norm", "vnorm", "unit", "axpy", "finite",
            "perp_unit", "rodrigues", "matvec", "rot_from_cols", "cols", "mat_mul_t", "rot_log",
            "min_rotation"]
 
@@ -51,6 +51,12 @@ def cross(a: Vec, b: Vec) -> Vec:
 def norm(a: Vec) -> float:
     """Euclidean length |a|."""
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+def vnorm(a) -> float:
+    """|a| of a 1-D float64 numpy array, computed as :func:`numpy.linalg.norm` computes it (the square root of
+    a·a, the same float) without its dispatch: for small vectors on a hot path."""
+    return math.sqrt(a.dot(a))
 
 
 def unit(a: Vec, eps: float = 1e-12) -> Vec | None:

@@ -62,7 +62,7 @@ def _points(name: str, p) -> np.ndarray:
         a = np.asarray(p, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a finite (N, 3) array in m, got {p!r}") from None
-    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] < 1 or not np.all(np.isfinite(a)):
+    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] < 1 or not np.isfinite(a).all():
         raise ValueError(f"{name} must be a finite (N, 3) array in m with N >= 1, got shape {a.shape}")
     return a
 

@@ -58,18 +58,6 @@ from nodes.arm_bridge.services import BridgeServices
 __all__ = ["ArmBridgeNode"]
 
 
-def _planned_joints(msg: ArmTarget) -> np.ndarray | None:
-    """The target's ``joints`` (6,) rad to check, or None when it carries none; raises
-    :class:`InputRejected` naming the field for another length or a value that is not finite."""
-    q = msg.joints
-    if q.size == 0:
-        return None
-    if q.shape != (6,) or not np.all(np.isfinite(q)):
-        raise InputRejected(f"ArmTarget.joints must be 6 finite joint values (rad) or empty, got "
-                            f"{q.tolist()}")
-    return q
-
-
 class ArmBridgeNode(BridgeServices, Node):
     """Node type ``arm_bridge`` (see module doc)."""
 
@@ -211,12 +199,11 @@ class ArmBridgeNode(BridgeServices, Node):
             self.ignored_while_held += 1
             return
         motion = SheetSegment.from_fields(msg)     # a MotionError (a ValueError) names the bad field
-        q_planned = _planned_joints(msg)
         if self.tracker.goal is None:
             self._pending = msg
             return
         self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True, pull=msg.pull,
-                                motion=motion, q_planned=q_planned)
+                                motion=motion, q_planned=msg.joints)
         if await self.stream.refresh() and self._paced_by_node:   # write it now rather than at the next tick
             await self.stream.rewrite_now()
 
@@ -227,7 +214,7 @@ class ArmBridgeNode(BridgeServices, Node):
             try:
                 self.tracker.set_target(msg.pose, msg.source_stamp, self.arm_now(), strict=True,
                                         pull=msg.pull, motion=SheetSegment.from_fields(msg),
-                                        q_planned=_planned_joints(msg))
+                                        q_planned=msg.joints)
             except ValueError as exc:
                 self._reject(f"ArmTarget: {exc}")
         # not logged

@@ -483,7 +483,7 @@ def test_the_planners_joints_are_taken_when_right_and_a_malformed_joints_field_i
                 h.inject(topics.ARM_LEFT_TARGET, bad)
                 await h.settle(0.1)
                 assert h.rejected(topics.ARM_LEFT_TARGET) == 1
-                assert "ArmTarget.joints" in h.node.last_rejection
+                assert "joints (the publisher's IK)" in h.node.last_rejection
                 assert np.abs(h.node.tracker.goal - q).max() < 1e-7 and h.node.tracker.source_stamp == 1.0
         finally:
             await twin.stop()
