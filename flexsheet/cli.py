@@ -94,8 +94,9 @@ def _add_launch_parser(sub) -> None:
                                    "nodes of "
                                    "one container (every node of a 'clock: sim' file) in one process; with "
                                    "prefixed output, respawn and clean Ctrl-C shutdown. The file is checked "
-                                   "first (params, hosts, ports, files, CURVE keys); with an error nothing "
-                                   "starts (exit 78).",
+                                   "first (params, hosts, ports, files, CURVE keys, and the graph: each "
+                                   "source fits the clock, each required input has a publisher, shared "
+                                   "values agree); with an error nothing starts (exit 78).",
                        **_fmt("  flexsheet launch launch/sim.yaml --duration 60 --out out/sim\n"
                               "  flexsheet launch launch/lab.yaml --check --host main   # check only, start "
                               "nothing\n  flexsheet launch launch/lab.yaml --host arm1     # on arm PC 1\n"

@@ -176,8 +176,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_CONFIG
     if args.check:
-        print(f"{args.file}: OK for {what}: {result.nodes} node(s); params, hosts, ports, files and keys "
-              "checked")
+        print(f"{args.file}: OK for {what}: {result.nodes} node(s); params, hosts, ports, files, keys "
+              "and the graph checked")
         return 0
     try:
         lf = load_launch(args.file)

@@ -17,9 +17,11 @@ A launch file (``launch/*.yaml``) is the single source of truth for hosts and po
 
 Every node publishes on ``tcp://<host address>:<port>`` (or an explicit ``endpoint:``) and subscribes to every
 node endpoint of the file, so the same file serves one machine (127.0.0.1) and the lab's three PCs;
-``flexsheet launch FILE --host NAME`` starts only that host's share. Strings in params may use ``$(out)`` (the
-``--out`` folder) and ``$(launch_dir)``; the security paths may use ``$(keys)`` (the keys folder:
-``$FLEXSHEET_KEYS``, else ``security.keys_dir``, else ~/.flexsheet/keys) and ``$(launch_dir)``.
+``flexsheet launch FILE --host NAME`` starts only that host's share. ``external: [/topic, …]`` names the
+topics a tool or another launch file feeds (:mod:`flexsheet.runtime.graph_builder` asks no node to publish
+them). Strings in params may use ``$(out)`` (the ``--out`` folder) and ``$(launch_dir)``; the security paths
+may use ``$(keys)`` (the keys folder: ``$FLEXSHEET_KEYS``, else ``security.keys_dir``, else
+~/.flexsheet/keys) and ``$(launch_dir)``.
 :mod:`flexsheet.runtime.launch_check` checks a file against this machine (``flexsheet launch FILE --check``)
 and ``flexsheet launch`` runs that check before it starts anything.
 
