@@ -301,14 +301,16 @@ class GraphBuilder:
         return out
 
     def _topics(self, e: _Entry, table: Mapping[str, Callable]) -> NodeTopics | None:
-        """``e``'s topics after its remaps (None: undeclared, or its params did not validate)."""
+        """``e``'s topics after its remaps (None: undeclared, or not declarable from its params). A node whose
+        type cannot be imported here (another host's) or whose params did not validate is declared from its
+        params as given."""
         t = e.topics
         if t is None:
             declare = table.get(e.type)
-            if declare is None or e.values is None:
+            if declare is None:
                 return None
             try:
-                t = declare(e.values)
+                t = declare(e.values if e.values is not None else e.params)
             except (ValueError, TypeError, KeyError):
                 return None
         rename = e.remaps.get

@@ -122,6 +122,23 @@ def test_a_node_that_may_publish_anything_silences_the_input_check():
         "src", cls=object, topics=NodeTopics(outputs=frozenset({"/fingertip"}))).build()
 
 
+def test_a_node_type_that_cannot_be_imported_here_still_declares_its_topics(monkeypatch):
+    """On an arm PC the main PC's renderer may not import (no GL): the inputs are still checked."""
+    from flexsheet.runtime import graph_builder
+
+    real = graph_builder.node_class
+
+    def node_class(name: str) -> type:
+        if name == "renderer":
+            raise ImportError("no GL here")
+        return real(name)
+    monkeypatch.setattr(graph_builder, "node_class", node_class)
+    err = _refused(_builder("sim", drop=("camera",)))
+    assert sorted(p.kind for p in err.problems) == ["input", "input", "type"]
+    types = [p.line for p in err.problems if p.kind == "type"]
+    assert types == ["node renderer: type = 'renderer': no GL here; install it or fix the type"]
+
+
 def test_optional_inputs_are_not_refused():
     """The planner and the FEM replayed from a bag's fingertips (no bridges, no camera, no head camera)."""
     (GraphBuilder(clock="wall")
