@@ -194,14 +194,7 @@ def _map_faults(root: Path = ROOT) -> list[tuple[str, str, str]]:
 
 #: imports that break the map in files that are being reworked elsewhere: (file, module) → the fix they await.
 #: Each entry must still be a fault (the test says so when one is fixed): delete it with the fix.
-PENDING = {
-    # the planner's params → PlannerConfig and the arm bases from display.yaml belong to the planner node
-    # (nodes/planner/): PlannerStage is to take the built config and bases
-    ("flexsheet/planning/planner_stage.py", "flexsheet.calibration.display_calib"): "xyzyaw_from_pose",
-    ("flexsheet/planning/planner_stage.py", "flexsheet.calibration.display_calib_file"): "load_display_calib",
-    ("flexsheet/planning/planner_stage.py", "flexsheet.calibration.sheet"): "TERMS (describe_sheet)",
-    ("flexsheet/planning/planner_stage.py", "flexsheet.runtime.params"): "build (params → config)",
-}
+PENDING: dict[tuple[str, str], str] = {}
 
 
 def test_the_map_holds_for_every_file():

@@ -13,33 +13,25 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flexsheet.calibration.display_calib import xyzyaw_from_pose
-from flexsheet.calibration.display_calib_file import load_display_calib
-from flexsheet.calibration.sheet import TERMS
 from flexsheet.model.force_depth import ForceDepth
-from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.scenes import Scene, is_paper_cylinder
 from flexsheet.model.sheet import frame_from_clamps, sheet_rotation
-from flexsheet.model.tension import SheetMaterial
-from flexsheet.planning.arm_command import ArmCommand, ArmCommander
+from flexsheet.planning.arm_command import ACCEL_SCALE, SPEED_SCALE, ArmCommand, ArmCommander
 from flexsheet.planning.arm_reach import ArmReach
 from flexsheet.planning.compliance import SceneCompliance
 from flexsheet.planning.head_guard import HeadGuard
 from flexsheet.planning.keepout import KeepOut
-from flexsheet.planning.limits import ReachModel
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.scene_scale import scale_depths, sheet_scene_scale
 from flexsheet.planning.shape import planner_shape
 from flexsheet.planning.surface_planner import SurfacePlanner
-from flexsheet.runtime.params import build
 
-__all__ = ["PlannerStage", "planner_config", "arm_bases", "fem_solves_scene", "held_sheet", "MATERIAL_RENAME",
-           "HEAD_WORDS"]
+__all__ = ["PlannerStage", "StageConfig", "fem_solves_scene", "held_sheet", "HEAD_WORDS"]
 
 #: the sheet model's source, by whether it was identified
 IDENTIFIED = {True: "identified from presses (display_calib sheet)",
@@ -47,8 +39,6 @@ IDENTIFIED = {True: "identified from presses (display_calib sheet)",
 #: the viewer's head state in words (the planner's log)
 HEAD_WORDS = {"tracking": "tracked: the sheet keeps out of its keep-out volume",
               "lost": "lost: holding the sheet until the glasses are seen again"}
-#: launch-file name of :attr:`SheetMaterial.size`
-MATERIAL_RENAME = {"size": "sheet_size"}
 
 
 def fem_solves_scene(scene_key: str, sc: Scene, key: str | None = None) -> bool:
@@ -71,57 +61,67 @@ def held_sheet(left_pose, right_pose, size: float) -> tuple | None:
     return o, sheet_rotation(n, u), max(2.0 * a / size - 1.0, 0.0)
 
 
-def _registered(p) -> tuple[ReachModel, SheetMaterial]:
-    """The reach model and the sheet: with a ``display_calib`` (the registered display), its arm bases
-    (``arms.left``/``arms.right``) and, where it has one, its identified ``sheet`` entry's terms on top of the
-    sheet params; else the ``left_base``/``right_base`` and sheet params. Raises ``ValueError`` naming the
-    file and entry when it is missing, unreadable or lacks an arm."""
-    reach, material = build(ReachModel, p), build(SheetMaterial, p, rename=MATERIAL_RENAME)
-    path = getattr(p, "display_calib", None)
-    if not path:
-        return reach, material
-    dc = load_display_calib(path, require=("arms.left", "arms.right"))
-    reach = replace(reach, left_base=xyzyaw_from_pose(dc.arms["left"].T_display_base),
-                    right_base=xyzyaw_from_pose(dc.arms["right"].T_display_base))
-    return reach, (dc.sheet.material(material) if dc.sheet is not None else material)
+@dataclass(frozen=True)
+class StageConfig:
+    """What the stage reads, built once from its node's params (the planner node's ``stage_config``).
 
+    ``planner``: the :class:`PlannerConfig` (material and reach registered); ``bases``: {"left", "right"}:
+    each arm's base as its bridge takes it ((4, 4) T_display_base registered, or (x, y, z, yaw)); None: the
+    reach model's; ``sheet_identified``: the material carries terms identified from presses (display_calib);
+    ``stiffness_from_scene``: the scene's compliance estimate, from ``min_contact_depth`` m; the head's
+    keep-out ``head_radius`` + ``keepout_margin`` m; ``pull_margin`` (0, 1]; ``arm_speed_scale``,
+    ``arm_accel_scale`` 1/s: the bridges' scales; ``use_fem_stiffness`` while fresher than ``fem_timeout`` s,
+    the median over ``fem_window`` s; ``scale_given``: ``stiffness_scale`` was set (the scene's own scale is
+    not fitted). Raises ``ValueError`` on a value out of range."""
 
-def planner_config(p) -> PlannerConfig:
-    """The :class:`PlannerConfig` that params ``p`` (the planner node's) describe; raises ``ValueError`` on
-    inconsistent values or a bad ``display_calib``."""
-    reach, material = _registered(p)
-    return build(PlannerConfig, p, material=material, limits=build(MotionLimits, p), reach=reach)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    bases: dict | None = None
+    sheet_identified: bool = False
+    stiffness_from_scene: bool = True
+    min_contact_depth: float = 5e-4
+    head_radius: float = 0.10
+    keepout_margin: float = 0.05
+    pull_margin: float = 0.9
+    arm_speed_scale: float = SPEED_SCALE
+    arm_accel_scale: float = ACCEL_SCALE
+    use_fem_stiffness: bool = True
+    fem_timeout: float = 0.5
+    fem_window: float = 0.0
+    scale_given: bool = False
 
+    def __post_init__(self) -> None:
+        for name in ("min_contact_depth", "head_radius", "pull_margin", "arm_speed_scale", "arm_accel_scale",
+                     "fem_timeout"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        if not (self.keepout_margin >= 0.0 and self.fem_window >= 0.0):
+            raise ValueError(f"keepout_margin and fem_window must be >= 0, got {self.keepout_margin!r}, "
+                             f"{self.fem_window!r}")
 
-def arm_bases(p, reach: ReachModel) -> dict:
-    """{"left", "right"}: each arm's base as its bridge takes it: the registered T_display_base (4, 4) of
-    ``p.display_calib`` when set (tilt included), else ``reach``'s (x, y, z, yaw)."""
-    path = getattr(p, "display_calib", None)
-    if not path:
-        return {"left": reach.left_base, "right": reach.right_base}
-    dc = load_display_calib(path, require=("arms.left", "arms.right"))
-    return {s: np.asarray(dc.arms[s].T_display_base, float) for s in ("left", "right")}
+    def arm_bases(self) -> dict:
+        """{"left", "right"}: :attr:`bases`, else the reach model's (x, y, z, yaw)."""
+        r = self.planner.reach
+        return self.bases if self.bases is not None else {"left": r.left_base, "right": r.right_base}
 
 
 class PlannerStage:
-    """The planner's state and decisions. ``scene``: the object; ``p``: the planner node's params (read:
-    ``planner_config()``, ``stiffness_from_scene``, ``min_contact_depth``, ``head_radius``,
-    ``keepout_margin``, ``pull_margin``, ``arm_speed_scale``, ``arm_accel_scale``, ``use_fem_stiffness``,
-    ``fem_timeout``, ``fem_window``, ``object_stiffness``, and ``stiffness_scale`` in ``model_fields_set``).
-    Raises ``ValueError`` on an inconsistent config."""
+    """The planner's state and decisions. ``scene``: the object; ``cfg``: the :class:`StageConfig` (a plain
+    config built once from the node's params). Raises ``ValueError`` on an inconsistent config."""
 
-    def __init__(self, scene: Scene, p) -> None:
-        self.scene, self.p = scene, p
+    def __init__(self, scene: Scene, cfg: StageConfig) -> None:
+        self.scene, self.cfg = scene, cfg
         shape = planner_shape(scene)
-        compliance = SceneCompliance(scene, shape, p.min_contact_depth) if p.stiffness_from_scene else None
+        compliance = (SceneCompliance(scene, shape, cfg.min_contact_depth) if cfg.stiffness_from_scene
+                      else None)
         self.key = scene.key()
-        cfg = p.planner_config()
-        self.guard = HeadGuard(KeepOut(head_radius=p.head_radius, margin=p.keepout_margin), cfg.material.size)
-        bases = arm_bases(p, cfg.reach)         # the arms' IK and joint rates: the bridges' own bases
+        pc = cfg.planner
+        self.guard = HeadGuard(KeepOut(head_radius=cfg.head_radius, margin=cfg.keepout_margin),
+                               pc.material.size)
+        bases = cfg.arm_bases()                 # the arms' IK and joint rates: the bridges' own bases
         self.arm_reach = ArmReach(bases)
-        self.planner = SurfacePlanner(shape, cfg, compliance, self.guard, self.arm_reach)
-        self.commander = ArmCommander(bases, cfg.material, p.pull_margin, p.arm_speed_scale,
-                                      p.arm_accel_scale, self.arm_reach)
+        self.planner = SurfacePlanner(shape, pc, compliance, self.guard, self.arm_reach)
+        self.commander = ArmCommander(bases, pc.material, cfg.pull_margin, cfg.arm_speed_scale,
+                                      cfg.arm_accel_scale, self.arm_reach)
         self.k_fem: float | None = None
         self._k_fem_at = 0.0
         self._press: tuple[float, float] | None = None
@@ -136,9 +136,7 @@ class PlannerStage:
         """The sheet model in words: identified from presses (``display_calib``'s ``sheet`` entry) or
         nominal."""
         m = self.planner.cfg.material
-        nominal = build(SheetMaterial, self.p, rename=MATERIAL_RENAME)
-        identified = any(getattr(m, k) != getattr(nominal, k) for k in TERMS)
-        return (f"{IDENTIFIED[identified]} "
+        return (f"{IDENTIFIED[self.cfg.sheet_identified]} "
                 f"(w {m.contact_width * 1e3:.1f} mm, growth {m.contact_growth:.2f}, own {m.own_stiffness:.3g}"
                 f" N + {m.own_growth:.3g} N/m, stretching {m.stretching:.3g} N/m³, strain offset "
                 f"{m.strain_offset:+.4f}, position {m.position_u:+.3f} along / {m.position_v:+.3f} across)")
@@ -149,7 +147,7 @@ class PlannerStage:
         force at its least stretch and at the arms' pull at the home pose. Returns the line to log (''
         none)."""
         cfg, line = self.planner.cfg, ""
-        if "stiffness_scale" not in self.p.model_fields_set:
+        if not self.cfg.scale_given:
             stroke_depth = self.scene.use.stroke_depth
             sc = sheet_scene_scale(table, cfg.material, self.planner.max_stretch, stroke_depth,
                                    cfg.contrast_gain)
@@ -174,7 +172,7 @@ class PlannerStage:
             self.fem_other_scene += 1
             return
         self._k_hist.append((now, float(stiffness)))
-        w = self.p.fem_window
+        w = self.cfg.fem_window
         recent = [k for t, k in self._k_hist if now - t <= w] if w > 0 else [float(stiffness)]
         self.k_fem = float(np.median(recent))
         self._k_fem_at = now
@@ -183,11 +181,11 @@ class PlannerStage:
     def stiffness(self, now: float) -> tuple[float | None, str]:
         """(stiffness N/m, source): the FEM's while fresh ("fem"); ``None`` for the planner's compliance model
         ("scene"); else ``object_stiffness`` ("param")."""
-        p = self.p
-        if p.use_fem_stiffness and self.k_fem is not None and now - self._k_fem_at <= p.fem_timeout:
+        c = self.cfg
+        if c.use_fem_stiffness and self.k_fem is not None and now - self._k_fem_at <= c.fem_timeout:
             return self.k_fem, "fem"
         if self.planner.compliance is None:
-            return p.object_stiffness, "param"
+            return self.planner.cfg.object_stiffness, "param"
         return None, "scene"
 
     def plan(self, now: float, t: float | None, pos) -> tuple[Plan | None, str]:
@@ -220,7 +218,7 @@ class PlannerStage:
                 "fem": "the FEM's dF/dd, and its force from 2 mm deep",
                 "scene": "the scene's estimate at the contact (Hertz contact + inclusions, "
                          "flexsheet/planning/compliance.py)",
-                "param": f"object_stiffness {self.p.object_stiffness:g} N/m"}[source]
+                "param": f"object_stiffness {self.planner.cfg.object_stiffness:g} N/m"}[source]
         if self.fem_other_scene and source != "fem":
             text += (f"; the FEM's stiffness is not used: it solves another object than scene "
                      f"{self.scene.name!r} ({self.fem_other_scene} messages so far)")

@@ -49,17 +49,12 @@ from flexsheet.planning.arm_command import ACCEL_SCALE, SPEED_SCALE
 from flexsheet.planning.limits import ReachModel
 from flexsheet.planning.plan import INPUT_REJECTIONS, Plan
 from flexsheet.planning.planner_config import PlannerConfig
-from flexsheet.planning.planner_stage import (
-    HEAD_WORDS,
-    MATERIAL_RENAME,
-    PlannerStage,
-    held_sheet,
-    planner_config,
-)
+from flexsheet.planning.planner_stage import HEAD_WORDS, PlannerStage, held_sheet
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.params import config_fields, params_model
 from flexsheet.runtime.qos import QoS
 from messages import ArmTarget, EyePose, Fingertip, ObjectDeformation, ObjectForceDepth, SheetTarget, topics
+from nodes.planner.config import MATERIAL_RENAME, planner_config, stage_config
 
 __all__ = ["PlannerParams", "PlannerNode"]
 
@@ -139,6 +134,7 @@ class PlannerNode(Node):
         planner = self.stage.planner
         if "stiffness_scale" in names:
             planner.cfg = replace(planner.cfg, stiffness_scale=self.params.stiffness_scale)
+            self.stage.cfg = replace(self.stage.cfg, scale_given=True)
             self.stage.scene_scale = None
         if "contrast_gain" in names:
             planner.cfg = replace(planner.cfg, contrast_gain=self.params.contrast_gain)
@@ -147,7 +143,7 @@ class PlannerNode(Node):
         p: PlannerParams = self.params
         scene = load_scene_or_paper(p.scene)
         self.log.info("%s", scene.describe())
-        self.stage = PlannerStage(scene, p)
+        self.stage = PlannerStage(scene, stage_config(p))
         self.log.info("sheet model: %s", self.stage.describe_sheet())
         if self.stage.first_line:
             self.log.info("%s", self.stage.first_line)

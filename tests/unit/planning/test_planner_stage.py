@@ -12,20 +12,13 @@ import pytest
 from flexsheet.arm.sheet_motion import SheetSegment
 from flexsheet.model.scenes import SCENES_DIR, load_scene, paper_scene
 from flexsheet.model.tension import clamp_force
-from flexsheet.planning.arm_command import ACCEL_SCALE, SPEED_SCALE
 from flexsheet.planning.planner_config import PlannerConfig
-from flexsheet.planning.planner_stage import PlannerStage, fem_solves_scene
+from flexsheet.planning.planner_stage import PlannerStage, StageConfig, fem_solves_scene
 from flexsheet.planning.pull_guard import PullGuard
 
 
-def _params(**kw) -> SimpleNamespace:
-    p = dict(min_contact_depth=5e-4, stiffness_from_scene=True, head_radius=0.10, keepout_margin=0.05,
-             pull_margin=0.9, arm_speed_scale=SPEED_SCALE, arm_accel_scale=ACCEL_SCALE,
-             use_fem_stiffness=True,
-             fem_timeout=0.5, fem_window=0.0, object_stiffness=30.0, model_fields_set=set(),
-             planner_config=PlannerConfig)
-    p.update(kw)
-    return SimpleNamespace(**p)
+def _params(object_stiffness: float = 30.0, **kw) -> StageConfig:
+    return StageConfig(planner=PlannerConfig(object_stiffness=object_stiffness), **kw)
 
 
 def test_a_fem_message_counts_only_for_the_scene_it_names():
