@@ -364,6 +364,8 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment latency_load --out docs/figures/realtime",
         "flexsheet experiment latency_load --out /tmp/ll --busy 0 2",
         "flexsheet experiment determinism --out docs/figures/simclock",
+        "flexsheet experiment speed --out /tmp/speed --duration 10 --cut head30=head_camera.rate_hz=30",
+        "flexsheet experiment speed --out docs/figures/speed --before /tmp/before",
         "flexsheet experiment head_rate --out docs/figures/head_rate --rates 60 30 20",
         "flexsheet experiment determinism --quick --out /tmp/det",           # run by the slow tier's
         "flexsheet experiment latency_load --out /tmp/ll --quick",  # tests/system/test_experiments_quick.py
@@ -385,6 +387,7 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet bench graph --seconds 10 --json > graph_bench.json",
         "flexsheet bench sim --duration 20 --out docs/figures/bench",
         "flexsheet bench sim --set scene=launch/scenes/organ.yaml --json",
+        "flexsheet bench sim --duration 20 --profile --out docs/figures/bench",
     )},
 }
 

@@ -115,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="example: flexsheet bench sim --duration 20 --out "
                                         "docs/figures/bench\n         flexsheet bench sim --set "
-                                        "scene=launch/scenes/organ.yaml --json")
+                                        "scene=launch/scenes/organ.yaml --json\n         flexsheet bench sim "
+                                        "--duration 20 --profile --out docs/figures/bench")
     ap.add_argument("--file", default="launch/sim.yaml", help="the launch file (default launch/sim.yaml)")
     ap.add_argument("--duration", type=float, default=20.0, help="simulated seconds (default 20)")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",

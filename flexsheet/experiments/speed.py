@@ -131,9 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="flexsheet experiment speed", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="example: flexsheet experiment speed --out /tmp/speed --duration 10 "
-                                        "--cut head30=head_camera.rate_hz=30\n         git worktree add "
-                                        "/tmp/before HEAD~1 && flexsheet experiment speed --out "
-                                        "docs/figures/speed --before /tmp/before")
+                                        "--cut head30=head_camera.rate_hz=30\n         flexsheet experiment "
+                                        "speed --out docs/figures/speed --before /tmp/before")
     ap.add_argument("--out", required=True, help="output folder (each run in a subfolder)")
     ap.add_argument("--duration", type=float, default=30.0, help="simulated seconds per run (default 30)")
     ap.add_argument("--seed", type=int, default=0, help="twin truth seed of the reference (default 0)")
