@@ -184,6 +184,21 @@ def test_launch_check_goes_through_the_builder():
     assert check_launch(LAUNCH / "sim_composed.yaml").ok
 
 
+def test_a_launch_files_external_topics_need_no_publisher(tmp_path):
+    path = tmp_path / "tri.yaml"
+    text = "name: tri\nhosts: {{main: {{address: 127.0.0.1}}}}\nbase_port: 21300\n{ext}nodes:\n" \
+           "  triangulator: {{type: triangulator, host: main}}\n"
+    path.write_text(text.format(ext=""))
+    assert [e.split(": ", 1)[1] for e in check_launch(path).errors] == [
+        f"node triangulator: input {t}: no node of graph tri publishes it; add a node of type camera, or "
+        f"declare it external (launch file: external: [{t}]) when a tool or another launch file feeds it"
+        for t in ("/camera/calibration", "/camera/stereo")]
+    path.write_text(text.format(ext="external: [/camera/stereo, /camera/calibration]\n"))
+    assert check_launch(path).errors == []
+    path.write_text(text.format(ext="external: [camera/stereo]\n"))
+    assert "key 'external': 'camera/stereo' is not a topic (/name)" in check_launch(path).errors[0]
+
+
 def test_the_graph_bench_builds_both_paths_on_the_wall_clock_with_network_controllers():
     arm, render = bench_graph(ARM_PATH), bench_graph(RENDER_PATH)
     assert arm.clock == "wall"
