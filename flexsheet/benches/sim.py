@@ -93,6 +93,11 @@ def _chart(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
+EXAMPLES = """example: flexsheet bench sim --duration 20 --out docs/figures/bench
+         flexsheet bench sim --set scene=launch/scenes/organ.yaml --json
+         flexsheet bench sim --duration 20 --profile --out docs/figures/bench"""
+
+
 def _print(result: dict) -> None:
     """The table (and with a profile its hottest functions) for a person."""
     print(f"{'node':14s} {'CPU-s/sim-s':>11s} {'budget':>7s}")
@@ -113,10 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     factor meet their targets, 1 when not, 2 when the launch failed."""
     ap = argparse.ArgumentParser(prog="flexsheet bench sim", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
-                                 epilog="example: flexsheet bench sim --duration 20 --out "
-                                        "docs/figures/bench\n         flexsheet bench sim --set "
-                                        "scene=launch/scenes/organ.yaml --json\n         flexsheet bench sim "
-                                        "--duration 20 --profile --out docs/figures/bench")
+                                 epilog=EXAMPLES)
     ap.add_argument("--file", default="launch/sim.yaml", help="the launch file (default launch/sim.yaml)")
     ap.add_argument("--duration", type=float, default=20.0, help="simulated seconds (default 20)")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.KEY=VALUE",
