@@ -70,7 +70,9 @@ def _run(name: str, tree: Path, sets: list[str], args: argparse.Namespace, seed:
         sys.stderr.write(res.stdout[-3000:] + res.stderr[-2000:])
         raise RuntimeError(f"run {name} failed (exit {res.returncode}, no simulated time in its summary); "
                            "its log is above")
-    r = {"name": name, "tree": str(tree), "set": sets, "seed": seed, "load_before": round(load, 2),
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True, text=True)
+    r = {"name": name, "tree": str(tree), "commit": commit.stdout.strip() or None, "set": sets, "seed": seed,
+         "load_before": round(load, 2),
          "launch_rc": res.returncode,
          "launch_wall_s": round(time.monotonic() - t0, 1),
          "cpu_per_sim_s": round(clock["process_cpu_run_s"] / clock["sim_s"], 4),
