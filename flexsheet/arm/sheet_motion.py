@@ -34,7 +34,7 @@ import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
-from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
+from ruckig import InputParameter, Result, Ruckig, RuckigError, Synchronization, Trajectory
 from scipy.spatial.transform import Rotation
 
 from flexsheet.arm.kinematics import ArmKinematics
@@ -99,6 +99,22 @@ def _log(R) -> np.ndarray:
     return Rotation.from_matrix(np.asarray(R, float)).as_rotvec()
 
 
+def _calculate(inp: InputParameter, traj: Trajectory):
+    """ruckig's ``calculate``: its :class:`Result`, else a line why: a code the binding has no name for (e.g.
+    −101, a duration ruckig cannot represent, on which its Python enum raises ``ValueError``) or its own
+    ``RuckigError`` (limits it cannot time)."""
+    try:
+        return Ruckig(DOF).calculate(inp, traj)
+    except ValueError as exc:
+        return str(exc).split(" ", 1)[0]
+    except RuckigError as exc:
+        return str(exc).splitlines()[0][:120]
+
+
+#: the most a segment is slowed for the joints, each pass (speed, acceleration bounds divided by at most this)
+SLOW_MAX = 10.0
+
+
 @dataclass(frozen=True, eq=False)
 class SheetSegment:
     """One segment of the sheet's motion (module doc).
@@ -142,12 +158,12 @@ class SheetSegment:
         if self.min_duration > 0.0:
             inp.minimum_duration = float(self.min_duration)
         traj = Trajectory(DOF)
-        res = Ruckig(DOF).calculate(inp, traj)
+        res = _calculate(inp, traj)
         if res != Result.Working:
             inp.synchronization = Synchronization.Time      # a start off the line: time-synchronised
-            res = Ruckig(DOF).calculate(inp, traj)
+            res = _calculate(inp, traj)
         if res != Result.Working:
-            raise MotionError(f"ruckig could not compute the sheet segment: {res.name}")
+            raise MotionError(f"ruckig could not compute the sheet segment: {getattr(res, 'name', res)}")
         object.__setattr__(self, "_traj", traj)
         _LIVE.add(self)
 
@@ -330,10 +346,11 @@ class JointRates:
 
     ``bases``: {"left", "right"}: (x, y, z, yaw) or (4, 4) T_display_base (the registered ones); ``qd_max``
     and ``qdd_max`` (6,) rad/s and rad/s²: the bridges' limits (the URDF's × ``speed_scale``, ×
-    ``accel_scale``). Joint rates are mapped from the clamps' twists through the Jacobians at the arms' joints
-    for the segment's goal and start (``samples`` instants; the Jacobian's change along one segment is second
-    order here). ``accel_allowance``: how far past ``qdd_max`` a segment's peak joint acceleration may go
-    (:meth:`ratios`)."""
+    ``accel_scale``). Joint rates are mapped from the clamps' twists, at ``samples`` instants, through the
+    Jacobians at the arms' joints for the segment's goal and start and at each instant's own joints (one
+    Newton step along the segment from the start's): near the wrist's singularity the Jacobian turns within
+    one segment, and the ends alone missed peaks of 1.8× the limit on a drawn ellipsoid. ``accel_allowance``:
+    how far past ``qdd_max`` a segment's peak joint acceleration may go (:meth:`ratios`)."""
 
     def __init__(self, bases: dict, qd_max, qdd_max, samples: int = 4, accel_allowance: float = 1.0) -> None:
         if set(bases) != {"left", "right"}:
@@ -349,11 +366,14 @@ class JointRates:
             raise ValueError(f"accel_allowance must be >= 1, got {accel_allowance!r}")
         self.accel_allowance = float(accel_allowance)
         self._jinv: dict[str, np.ndarray] = {}     # side: (n, 6, 6) inverse Jacobians
+        self._seed: dict[str, np.ndarray] = {}     # side: the joints (6,) rad the segment starts near
 
     def at(self, joints: dict) -> None:
         """The arms' joints (6,) rad to map through: {side: [q, ...]} (e.g. the IK of this plan's targets and
-        of the last plan's). A singular Jacobian is skipped."""
+        of the last plan's). A singular Jacobian is skipped. The last of each side's list also seeds
+        :meth:`ratios`' joints along the segment."""
         self._jinv = {}
+        self._seed = {side: np.asarray(qs[-1], float) for side, qs in joints.items() if len(qs)}
         for side, qs in joints.items():
             out = []
             for q in qs:
@@ -374,13 +394,31 @@ class JointRates:
         if seg.duration <= 0.0 or not sides:
             return 0.0, 0.0
         rv = ra = 0.0
+        q = {s: self._seed[s] for s in sides if s in self._seed}
         for k in range(self.samples):
             clamps = seg.clamps(seg.t0 + seg.duration * (k + 0.5) / self.samples, True, sides)
-            for side, (_, tw, dtw) in zip(sides, clamps, strict=True):
+            for side, (T, tw, dtw) in zip(sides, clamps, strict=True):
                 Ji = self._jinv[side]                                   # (n, 6, 6)
                 rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))
                 ra = max(ra, float(np.max(np.abs(Ji @ dtw) / self.qdd_max)))
+                if side in q:           # and at the instant's own joints: a wrist near its singularity
+                    v, a, q[side] = self._along(side, T, q[side], tw, dtw)   # turns fast between the ends
+                    rv, ra = max(rv, v), max(ra, a)
         return rv, ra / self.accel_allowance
+
+    def _along(self, side: str, T: np.ndarray, q: np.ndarray, tw: np.ndarray,
+               dtw: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """(peak joint speed / ``qd_max``, peak acceleration / ``qdd_max``, the joints (6,) rad) at the
+        clamp pose ``T`` (4, 4) moving at twist ``tw`` and its rate ``dtw`` (6,): the joints one Newton step
+        from ``q`` (the last instant's: a few mm away), the Jacobian there. A singular one counts nothing."""
+        kin = self.kin[side]
+        try:
+            qn = kin.track(T, q, tw)[0]
+            v = np.linalg.solve(kin.jacobian(qn), np.column_stack([tw, dtw]))
+        except np.linalg.LinAlgError:
+            return 0.0, 0.0, q
+        return (float(np.max(np.abs(v[:, 0]) / self.qd_max)), float(np.max(np.abs(v[:, 1]) / self.qdd_max)),
+                qn)
 
 
 class SheetShaper:
@@ -458,7 +496,8 @@ class SheetShaper:
                     rv, ra = self.rates.ratios(seg)
                     if rv <= 1.0 and ra <= 1.0:
                         break
-                    kv, ka = max(rv, 1.0) * 1.1, max(ra, 1.0) * 1.1
+                    # at most SLOW_MAX-fold: a motion through a joint singularity cannot be slowed enough
+                    kv, ka = (min(max(r, 1.0) * 1.1, SLOW_MAX) for r in (rv, ra))
                     # the jerk stays: a motion already accelerating past the lowered
                     # bound must be braked within it, or it runs on while its
                     # acceleration ramps down (the strain overshot its goal 4-fold)

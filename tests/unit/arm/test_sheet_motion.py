@@ -5,6 +5,7 @@ through a 36° turn of the sheet."""
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -257,3 +258,34 @@ def test_the_plans_velocity_is_their_least_squares_slope_and_a_single_plan_is_re
     assert np.allclose(om, w, atol=1e-3)
     with pytest.raises(ValueError, match="at least two"):
         plan_velocity(plans[:1])
+
+
+class _EndsOnly(JointRates):
+    """The joint rates mapped through the segment's end joints alone (the negative control)."""
+
+    def _along(self, side, T, q, tw, dtw):
+        return 0.0, 0.0, q
+
+
+def test_the_joint_rates_are_judged_along_the_segment_not_at_its_ends_alone(monkeypatch):
+    """A 36° turn about (0, −0.7, 0.7) in 0.5 s: the wrist's Jacobian turns between the segment's ends. Judged
+    at each sampled instant's own joints, the motion asks at most 1.06× the joints' speed and the span stays
+    within 0.05 mm p99; judged at the ends alone it asks 1.14× and the span leaves by 0.07 mm."""
+    err, speed, refused = _two_bridges(36.0, 0.5, motion=True, axis=(0.0, -0.7, 0.7))
+    assert speed <= 1.06 and np.percentile(err, 99) <= 0.05 and refused == 0
+    monkeypatch.setattr(sys.modules[__name__], "JointRates", _EndsOnly)
+    err, speed, _ = _two_bridges(36.0, 0.5, motion=True, axis=(0.0, -0.7, 0.7))
+    assert speed > 1.1 and np.percentile(err, 99) > 0.06
+
+
+def test_a_motion_ruckig_cannot_time_is_a_motion_error_and_slowing_is_bounded():
+    """Slowing stops at SLOW_MAX-fold each pass; a segment whose bounds ruckig cannot represent is refused as
+    a MotionError (its binding's unnamed result code), never a bare ValueError."""
+    from flexsheet.arm.sheet_motion import SLOW_MAX
+
+    assert SLOW_MAX == 10.0
+    start, goal = np.zeros((3, 7)), np.zeros((2, 7))
+    goal[0, 0] = 1.0
+    limits = np.array([[1e-12] * 7, [1e-12] * 7, [1.0] * 7])
+    with pytest.raises(MotionError, match="ruckig could not compute"):
+        SheetSegment(0.0, np.eye(3), start, goal, limits)
