@@ -30,8 +30,11 @@ class PlannerConfig:
     first-order low-pass on the compliance model's stiffness (it follows the measured push depth, which
     carries the camera's noise; 0: none); ``max_dt`` s: longer gaps count as one nominal period;
     ``future_stamp_tolerance`` s: how far ahead of the caller's clock (``update``'s ``now``) a sample's stamp
-    may be (clock offsets between hosts, a prediction horizon) before it is refused. Raises ``ValueError`` on
-    bad values."""
+    may be (clock offsets between hosts, a prediction horizon) before it is refused; ``pose_cutoff`` Hz: the
+    corner of the low-pass on the fingertip that forms the sheet's orientation and contact point, so the
+    finger's tremor does not turn the sheet (0: off; the push depth is not filtered), ``pose_velocity_cutoff``
+    Hz: the corner of the smoothed velocity whose lead cancels that low-pass's lag
+    (:class:`flexsheet.planning.pose_filter.PoseFilter`). Raises ``ValueError`` on bad values."""
 
     touch_distance: float = 0.002
     release_distance: float = 0.006
@@ -46,6 +49,8 @@ class PlannerConfig:
     stiffness_tau: float = 0.1
     max_dt: float = 0.1
     future_stamp_tolerance: float = 0.5
+    pose_cutoff: float = 3.0
+    pose_velocity_cutoff: float = 3.0
     material: SheetMaterial = field(default_factory=SheetMaterial)
     limits: MotionLimits = field(default_factory=MotionLimits)
     reach: ReachModel = field(default_factory=ReachModel)
@@ -67,5 +72,9 @@ class PlannerConfig:
             raise ValueError(f"stiffness_scale must be in (0, 100], got {self.stiffness_scale!r}")
         if not (math.isfinite(self.contrast_gain) and 0.0 < self.contrast_gain <= 5.0):
             raise ValueError(f"contrast_gain must be in (0, 5], got {self.contrast_gain!r}")
+        if not (math.isfinite(self.pose_cutoff) and 0.0 <= self.pose_cutoff <= 50.0):
+            raise ValueError(f"pose_cutoff must be in [0, 50] Hz, got {self.pose_cutoff!r}")
+        if not (math.isfinite(self.pose_velocity_cutoff) and 0.0 < self.pose_velocity_cutoff <= 50.0):
+            raise ValueError(f"pose_velocity_cutoff must be in (0, 50] Hz, got {self.pose_velocity_cutoff!r}")
         if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
             raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")

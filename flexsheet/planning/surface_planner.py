@@ -28,6 +28,8 @@ Paper §V-A and Fig. 7, generalised:
 * **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
   checked by :class:`flexsheet.planning.limits.ReachModel` and, with an ``arm_reach``, both arms' IK
   (:meth:`flexsheet.planning.arm_reach.ArmReach.screen`: the nearest reachable pose, ``reach:nearest``).
+* **Tremor**: touching, the contact and normal come from the fingertip through :class:`~flexsheet.planning.
+  pose_filter.PoseFilter` (``pose_cutoff``); the depth (touch, stretch) is the raw sample's along that normal.
 
 Defined behaviour where methods fail (each has a test in ``tests/unit/planning/test_surface_planner.py``):
 
@@ -86,6 +88,7 @@ from flexsheet.model.vec import (
 from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
+from flexsheet.planning.pose_filter import PoseFilter
 
 __all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "SurfacePlanner"]
 
@@ -125,6 +128,7 @@ class SurfacePlanner:
         self.cfg = config or PlannerConfig()
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
+        self.pose_filter = PoseFilter(self.cfg.pose_cutoff, self.cfg.pose_velocity_cutoff)
         self._eps_max = max_stretch_within_force(self.cfg.material)
         #: the arms' pull limit at their pose, N (None: only the
         #: material's ``max_force``), :meth:`set_pull_limit`
@@ -177,6 +181,7 @@ class SurfacePlanner:
         self.s: tuple[float, float] = (0.0, 0.0)
         self.touching = False
         self.limiter.clear()
+        self.pose_filter.reset()
         self._tcache: tuple[float, float, float, float, TensionResult] | None = None
         self._k_model: float | None = None
         self.counts: dict[str, int] = {}
@@ -222,10 +227,12 @@ class SurfacePlanner:
         if self.p_last is not None and norm(sub(s.p, self.p_last)) > cfg.jump_distance:
             self.touching = False
             status.append("reacquired")
-        proj = self.shape.project(s.p, self.n_last, cfg.singular_eps)
+        pf = self.pose_filter.step(s.p, None if status else s.dt)   # the pose path's fingertip, touching;
+        pf = pf if self.touching else s.p                           # away the raw one: the sheet waits there
+        proj = self.shape.project(pf, self.n_last, cfg.singular_eps)
         if proj.singular:
             status.append(Hold.SINGULAR)
-        q, n, dist = proj.point, proj.normal, proj.distance
+        q, n, dist = proj.point, proj.normal, proj.distance + dot(proj.normal, sub(s.p, pf))
         depth = max(0.0, -dist)
         k_obj, k_source, table_force = self._request(s, q, n, dist)
         if k_obj is None:
@@ -268,6 +275,7 @@ class SurfacePlanner:
         L = self.last
         if L is None or not isinstance(s, _Sample):
             return self.hold(reason)
+        self.pose_filter.step(s.p, s.dt)
         proj = self.shape.project(s.p, L.normal, self.cfg.singular_eps)
         depth = max(0.0, -proj.distance)
         k_obj, k_source, table_force = self._request(s, proj.point, proj.normal, proj.distance)

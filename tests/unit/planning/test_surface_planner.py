@@ -27,6 +27,11 @@ R = geometry.CYLINDER_RADIUS
 DT = 1.0 / 48.0
 
 
+def _rest(x, n=96):
+    """``x`` (N,) with its last value held ``n`` samples more: the pose filter settles on a resting finger."""
+    return np.r_[x, np.full(n, x[-1])]
+
+
 def _stroke(planner, shape, angles, h=None, depth=0.0005, t0=0.0):
     plans = []
     for k, a in enumerate(angles):
@@ -56,7 +61,7 @@ def test_rolling_without_slip_arc_equals_sheet_length():
     c = paper_cylinder()
     pl = SurfacePlanner(c)
     angles = np.radians(np.linspace(0, 60, 481))
-    plans = _stroke(pl, c, -angles)          # point_at positive angles go down (a × e1 = −z)
+    plans = _stroke(pl, c, -_rest(angles))   # point_at positive angles go down (a × e1 = −z)
     last = plans[-1]
     arc = R * math.radians(60)
     assert last.touching and last.status == "ok"
@@ -76,8 +81,8 @@ def test_two_d_stroking_around_and_along_is_path_independent_on_cylinder():
     h1 = np.r_[np.zeros(n), np.linspace(0, 0.03, n)]
     a2 = np.r_[np.zeros(n), np.linspace(0, 0.5, n)]
     h2 = np.r_[np.linspace(0, 0.03, n), np.full(n, 0.03)]
-    p1 = _stroke(SurfacePlanner(c), c, a1, h1)[-1]
-    p2 = _stroke(SurfacePlanner(c), c, a2, h2)[-1]
+    p1 = _stroke(SurfacePlanner(c), c, _rest(a1), _rest(h1))[-1]
+    p2 = _stroke(SurfacePlanner(c), c, _rest(a2), _rest(h2))[-1]
     assert norm(sub(p1.origin, p2.origin)) < 1e-9            # cylinder is developable: no holonomy
     assert p1.offset == pytest.approx(p2.offset, abs=1e-9)
     assert abs(p1.offset[0]) == pytest.approx(0.03, abs=1e-9)
@@ -86,7 +91,7 @@ def test_two_d_stroking_around_and_along_is_path_independent_on_cylinder():
 def test_stroking_on_sphere_keeps_tangent_and_rolls_geodesic():
     s = make_shape("sphere", {"center": (-0.04, 0.0, 0.0), "radius": 0.04})
     pl = SurfacePlanner(s)
-    for k, a in enumerate(np.linspace(0, 0.6, 300)):
+    for k, a in enumerate(_rest(np.linspace(0, 0.6, 300))):
         p = (-0.04 + 0.0395 * math.cos(a), 0.0395 * math.sin(a), 0.0)
         plan = pl.update(k * DT, p)
     assert plan.touching
@@ -109,8 +114,8 @@ def test_pushing_keeps_tangent_pose_and_reports_depth():
 def test_stroke_and_push_combined():
     c = paper_cylinder()
     pl = SurfacePlanner(c)
-    angles = np.linspace(0, 0.5, 300)
-    depth = 0.004 * np.sin(np.linspace(0, math.pi, 300)) + 0.0005
+    angles = _rest(np.linspace(0, 0.5, 300))
+    depth = _rest(0.004 * np.sin(np.linspace(0, math.pi, 300)) + 0.0005)
     for k, (a, d) in enumerate(zip(angles, depth, strict=False)):
         plan = pl.update(k * DT, c.point_at(a, 0.0, R - d))
     assert plan.touching and math.hypot(*plan.offset) == pytest.approx(R * 0.5, rel=1e-9)
