@@ -44,15 +44,17 @@ import math
 import multiprocessing as mp
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.chain import bridge_chain
 from flexsheet.arm.controller_port import controller_source
-from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
-from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.sheet_motion import JointRates, SheetShaper
+from flexsheet.arm.joint_rates import JointRates
+from flexsheet.arm.kinematics import QD_MAX, ArmKinematics, home_joints
+from flexsheet.arm.sheet_motion import SheetShaper
 from flexsheet.arm.stream import ArmStream
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.model import geometry
@@ -155,14 +157,13 @@ def bench_motion(n_stroke: int = 480) -> dict:
 def track_stroke(duration: float, side: str = "left") -> dict:
     """Simulated-time run of tracker → limiter → controller core for one ±60° stroke of ``duration`` s."""
     base = LEFT_BASE if side == "left" else RIGHT_BASE
-    kin = ArmKinematics(side, base, Q_LOWER + 0.02, Q_UPPER - 0.02)
-    fk = ArmKinematics(side, base)
     th0 = math.radians(-60.0)
-    tr = TargetTracker(kin, target_timeout=1.0)
-    q0 = kin.ik(_clamp(side, th0), home_joints(side), max_jump=10.0).q
+    chain = bridge_chain(side, base, PERIOD, replace(BridgeConfig(), target_timeout=1.0))
+    fk, tr, lim = chain.fk, chain.tracker, chain.limiter
+    q0 = chain.kin.ik(_clamp(side, th0), home_joints(side), max_jump=10.0).q
+    lim.reset(q0)
     core = ControllerCore(q0, period=PERIOD)
     core.write_holding(0, [1], 0.0)
-    lim = StreamLimiter(q0, PERIOD, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
     tr.seed(q0)
     n = int(duration / PERIOD) + int(0.5 / PERIOD)
     t_cam = 1.0 / 48.0
@@ -216,9 +217,9 @@ def bench_cycle(n_cycles: int) -> dict:
     proc.start()
     try:
         port = port_q.get(timeout=30)
-        kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
-        tr = TargetTracker(kin, target_timeout=1e9)
-        lim = StreamLimiter(home_joints("left"), PERIOD, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
+        chain = bridge_chain("left", LEFT_BASE, PERIOD, replace(BridgeConfig(), target_timeout=1e9),
+                             home_joints("left"))
+        tr, lim = chain.tracker, chain.limiter
         stream = ArmStream(tr, lim, controller_source(SOURCE).link("modbus", "127.0.0.1", port,
                                                                      request_timeout=0.5))
         stream.cycle_times = []
@@ -290,9 +291,9 @@ def bench_mxt(n_cycles: int, period: float = MXT_PERIOD) -> dict:
     twin_res: dict = {}
     try:
         port = port_q.get(timeout=60)
-        kin = ArmKinematics("left", LEFT_BASE, Q_LOWER + 0.02, Q_UPPER - 0.02)
-        tr = TargetTracker(kin, target_timeout=1e9)
-        lim = StreamLimiter(home_joints("left"), period, 0.5 * QD_MAX, QD_MAX, Q_LOWER, Q_UPPER, 0.02)
+        chain = bridge_chain("left", LEFT_BASE, period, replace(BridgeConfig(), target_timeout=1e9),
+                             home_joints("left"))
+        tr, lim = chain.tracker, chain.limiter
         link = controller_source(SOURCE).link("mxt", "127.0.0.1", port, period=period, lost_cycles=10 ** 9,
                                               record=True)
         stream = ArmStream(tr, lim, link)

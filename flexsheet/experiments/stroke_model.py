@@ -43,9 +43,9 @@ import numpy as np
 import yaml
 
 from flexsheet.analysis.table1 import DD_CONVENTION, PAPER_TABLE1, table1_row, target
-from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
-from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.tracking import TargetTracker
+from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.chain import bridge_chain
+from flexsheet.arm.kinematics import QD_MAX, home_joints
 from flexsheet.calibration.display_calib import nominal_display_calib
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.dirs import launch_dir
@@ -113,16 +113,16 @@ class LatencyModel:
 
 @dataclass(frozen=True)
 class ArmChain:
-    """The arm side, as the bridge and the controller twin run it (defaults = their node defaults):
-    ``speed_scale``/``accel_scale`` of the bridge's command stream (× the URDF = datasheet speeds; accel =
-    scale × speed per s), ``limit_margin`` rad, ``max_ik_jump`` rad, ``target_timeout`` s; the controller
-    twin's ``ctrl_speed_scale`` and ``ctrl_accel_factor`` (servo limits)."""
+    """The arm side as the bridge (defaults: :class:`~flexsheet.arm.bridge_config.BridgeConfig`'s, their one
+    owner) and the controller twin run it: the stream's ``speed_scale``/``accel_scale`` (× the URDF's speeds;
+    accel = scale × speed per s), ``limit_margin``, ``max_ik_jump`` rad, ``target_timeout`` s; the twin's
+    ``ctrl_speed_scale`` and ``ctrl_accel_factor`` (servo limits)."""
 
-    speed_scale: float = 0.5
-    accel_scale: float = 2.0
-    limit_margin: float = 0.02
-    max_ik_jump: float = 0.5
-    target_timeout: float = 0.25
+    speed_scale: float = BridgeConfig.speed_scale
+    accel_scale: float = BridgeConfig.accel_scale
+    limit_margin: float = BridgeConfig.limit_margin
+    max_ik_jump: float = BridgeConfig.max_ik_jump
+    target_timeout: float = BridgeConfig.target_timeout
     ctrl_speed_scale: float = 1.0
     ctrl_accel_factor: float = 4.0
 
@@ -240,17 +240,17 @@ def _arm_chains(twin: Twin, chain: ArmChain, latency: LatencyModel, first_clamps
     """Per side (target tracker on the estimator's kinematics, stream limiter, servo), at rest on the first
     plan."""
     chains = {}
-    qd = QD_MAX * chain.speed_scale
     sp = ServoParams(tau=latency.servo_tau, qd_max=QD_MAX * chain.ctrl_speed_scale,
                      qdd_max=QD_MAX * chain.ctrl_speed_scale * chain.ctrl_accel_factor)
+    cfg = replace(BridgeConfig(), span_band=None, **{k: getattr(chain, k) for k in (
+        "speed_scale", "accel_scale", "limit_margin", "max_ik_jump", "target_timeout")})
     for k, side in enumerate(("left", "right")):
-        m = chain.limit_margin
-        kin = ArmKinematics(side, twin.bases[side], Q_LOWER + m, Q_UPPER - m)
-        tracker = TargetTracker(kin, chain.target_timeout, chain.max_ik_jump)
+        arm = bridge_chain(side, twin.bases[side], Ts, cfg)
+        tracker, lim = arm.tracker, arm.limiter
         tracker.seed(home_joints(side))
         res = tracker.set_target(first_clamps[k], 0.0, 0.0)       # start at rest on the first plan
         q0 = res.q if res.ok else home_joints(side)
-        lim = StreamLimiter(q0, Ts, qd, qd * chain.accel_scale, Q_LOWER, Q_UPPER, m)
+        lim.reset(q0)
         chains[side] = (tracker, lim, JointServo(q0, sp))
     return chains
 

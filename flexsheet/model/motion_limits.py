@@ -20,7 +20,7 @@ __all__ = ["MotionLimits", "RAMP_S", "STRETCH_RAMP_S"]
 RAMP_S = 0.005
 #: the time the clamp strain takes to reach its full rate, and from there its full acceleration, s: a press's
 #: tension must follow the finger (the joints' own limits slow it where they must,
-#: :class:`flexsheet.arm.sheet_motion.JointRates`)
+#: :class:`flexsheet.arm.joint_rates.JointRates`)
 STRETCH_RAMP_S = 0.01
 
 

@@ -9,7 +9,7 @@ the :class:`ArmCommander`
   (the bridges check it rather than solve again) and caps the next plans' clamp force at ``pull_margin`` ×
   the arms' torque-limited pull there;
 - shapes the sheet's motion from where it is to the plan (:class:`flexsheet.arm.sheet_motion.SheetShaper`),
-  within both arms' joint rates (:class:`~flexsheet.arm.sheet_motion.JointRates` at ``speed_scale`` × the
+  within both arms' joint rates (:class:`~flexsheet.arm.joint_rates.JointRates` at ``speed_scale`` × the
   URDF's joint speeds and ``accel_scale`` × that per second: the bridges' own scales), and at the plan's own
   velocity fitted over its last plans, so that the motion reaches the plan's track by the next plan.
 
@@ -26,8 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.joint_rates import JointRates
 from flexsheet.arm.kinematics import QD_MAX
-from flexsheet.arm.sheet_motion import VELOCITY_PLANS, JointRates, MotionError, SheetShaper, plan_velocity
+from flexsheet.arm.sheet_motion import VELOCITY_PLANS, MotionError, SheetShaper, plan_velocity
 from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.sheet import clamp_poses, sheet_rotation
 from flexsheet.model.tension import SheetMaterial, clamp_force

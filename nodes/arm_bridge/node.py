@@ -37,12 +37,11 @@ import math
 
 import numpy as np
 
+from flexsheet.arm.chain import bridge_chain
 from flexsheet.arm.controller_port import controller_source
-from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics
-from flexsheet.arm.limiter import StreamLimiter
 from flexsheet.arm.sheet_motion import SheetSegment
 from flexsheet.arm.stream import ArmStream, CycleReport
-from flexsheet.arm.tracking import BridgeStatus, TargetTracker, peer_holds
+from flexsheet.arm.tracking import BridgeStatus, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.timing import LAB
@@ -80,14 +79,8 @@ class ArmBridgeNode(BridgeServices, Node):
                 raise ValueError(f"base must be finite, got {base!r}")
             self.log.warning("%s arm base: design values %s (no display_calib; docs/calibration.md)", p.arm,
                              [round(float(v), 4) for v in base])
-        margin = p.limit_margin
-        self.kin = ArmKinematics(p.arm, base, Q_LOWER + margin, Q_UPPER - margin)
-        self.fk_kin = ArmKinematics(p.arm, base)
-        self.tracker = TargetTracker(self.kin, p.target_timeout, p.max_ik_jump)
-        self.tracker.span.set_band(p.span_band)
-        qd = QD_MAX * p.speed_scale
-        limiter = StreamLimiter(np.clip(np.zeros(6), Q_LOWER, Q_UPPER), p.period, qd, qd * p.accel_scale,
-                                Q_LOWER, Q_UPPER, margin)
+        chain = bridge_chain(p.arm, base, p.period, p)
+        self.kin, self.fk_kin, self.tracker, limiter = chain.kin, chain.fk, chain.tracker, chain.limiter
         source = controller_source(p.source)
         source.check_clock(self.clock)
         if p.protocol not in source.protocols:

@@ -12,9 +12,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from flexsheet.arm.bridge_config import BridgeConfig
+from flexsheet.arm.joint_rates import JointRates
 from flexsheet.arm.kinematics import Q_LOWER, Q_UPPER, QD_MAX, ArmKinematics, home_joints
 from flexsheet.arm.limiter import StreamLimiter
-from flexsheet.arm.sheet_motion import JointRates, MotionError, SheetSegment, SheetShaper
+from flexsheet.arm.sheet_motion import MotionError, SheetSegment, SheetShaper
 from flexsheet.arm.tracking import TargetTracker
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE, SHEET_SIZE
 from flexsheet.model.motion_limits import MotionLimits
