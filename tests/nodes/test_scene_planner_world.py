@@ -94,6 +94,9 @@ def test_world_node_plays_the_scene_path(tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------------------------------------- planner
 def test_planner_on_the_sphere_is_tangent_to_it():
+    """Along a 10 s stroke the contact lies on the sphere, the sheet is tangent there (§V-A on a sphere: the
+    ray from the centre), and the contact stays within 0.5 mm of the finger's own ray point (the pose
+    filter's transient: it takes the finger's tremor out of the sheet's pose)."""
     c, R = _sphere_numbers()
     sc = load_scene(SPHERE)
     f = FingerScript(scene=sc, seed=1, moving_time=10.0)
@@ -102,10 +105,13 @@ def test_planner_on_the_sphere_is_tangent_to_it():
     for t in np.arange(0.0, f.duration, 1.0 / 48.0):
         p = f.position(t)
         plan = pl.update(t, p)
-        n_true = (p - c) / np.linalg.norm(p - c)              # §V-A on a sphere: the ray from the centre
-        assert np.asarray(plan.contact) == pytest.approx(c + R * n_true, abs=1e-9)
+        con = np.asarray(plan.contact)
+        n_true = (p - c) / np.linalg.norm(p - c)
+        n_con = (con - c) / np.linalg.norm(con - c)
+        assert np.linalg.norm(con - c) == pytest.approx(R, abs=1e-9)
+        assert np.linalg.norm(con - (c + R * n_true)) < 5e-4
         if "rate_limited" not in plan.status:
-            worst = max(worst, math.degrees(math.acos(min(1.0, float(np.dot(plan.normal, n_true))))))
+            worst = max(worst, math.degrees(math.acos(min(1.0, float(np.dot(plan.normal, n_con))))))
     assert worst < 1e-5
     assert plan.touching and plan.k_source == "scene"
 

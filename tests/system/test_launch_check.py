@@ -253,6 +253,7 @@ def test_display_calib_missing_or_stale_entries_are_named_per_host(tmp_path):
                                  "params": {"model": "file", "calib_file": "$(launch_dir)/stereo.yaml"}},
                          "rend": {"type": "renderer", "host": "main"},
                          "arm_right": {"type": "arm_bridge", "host": "arm1", "params": {"arm": "right"}}})
+    doc["external"] = ["/arm/right/target"]      # no planner in this file: its targets come from outside
     path = tmp_path / "chk.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     nominal = dc.nominal_display_calib()
