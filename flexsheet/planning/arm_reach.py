@@ -98,6 +98,12 @@ class ArmReach:
                     self.seed[s] = res[s].q
         return res
 
+    def solution(self) -> dict:
+        """{side: (6,) rad, or None where it did not solve}: the joints of the last pair solved (none yet:
+        every side None)."""
+        res = self._last[1] if self._last is not None else {}
+        return {s: (res[s].q if s in res and res[s].ok else None) for s in SIDES}
+
     def reachable(self, T_left: np.ndarray, T_right: np.ndarray) -> tuple[bool, str]:
         """(both targets solve, the first failing arm's "side:status" or "ok"); an arm that solves takes its
         solution as its next seed."""

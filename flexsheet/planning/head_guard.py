@@ -11,6 +11,9 @@ sphere plus a margin, from the eye):
   clamp strain rate ``≤ 0.1·reduced_speed / (size/2)``: together at most 0.9 of it at any corner;
 * **inside** (the next pose would put a point of the sheet or a clamp in the keep-out): the step is not taken;
   the sheet backs off along −x (:func:`~flexsheet.planning.keepout.retreat_point`) at the reduced speed;
+* **the arms** (:meth:`HeadGuard.arms`): both arms at the IK of the pose to send, by the bridges' own test
+  (:func:`~flexsheet.planning.keepout.arm_keepout_clearance`) at this guard's larger margin, so no bridge
+  refuses a target for the keep-out; inside, the planner backs off the same way (``keep_out:<arm> <part>``);
 * **lost** (the head camera runs but the glasses are not found): the planner holds the pose while the stretch
   follows the push (:meth:`~flexsheet.planning.surface_planner.SurfacePlanner.hold_pose`); lost while near
   (:attr:`HeadGuard.near`), every step backs off from the last known head instead, since a head that was that
@@ -33,7 +36,14 @@ import numpy as np
 
 from flexsheet.model.motion_limits import MotionLimits
 from flexsheet.model.sheet import clamp_half_span
-from flexsheet.planning.keepout import KeepOut, KeepOutVerdict, check_targets, retreat_point, sheet_points
+from flexsheet.planning.keepout import (
+    KeepOut,
+    KeepOutVerdict,
+    arm_keepout_clearance,
+    check_targets,
+    retreat_point,
+    sheet_points,
+)
 
 __all__ = ["HeadGuard", "GuardStep", "GUARD_BAND"]
 
@@ -66,8 +76,10 @@ class HeadGuard:
         self.size = float(size)
         self.eye: np.ndarray | None = None
         self.lost = False
-        #: the last judged sheet was within ``near_distance`` of the keep-out
+        #: the last judged sheet (or arms, :meth:`arms`) was within ``near_distance`` of the keep-out
         self.near = False
+        #: the last arms judged (:meth:`arms`) were within ``near_distance`` of the keep-out
+        self.arms_near = False
         self.counts = {"near": 0, "retreat": 0}
 
     @property
@@ -100,7 +112,7 @@ class HeadGuard:
         if self.eye is None or origin is None:
             return base
         v = self.verdict(origin, R, stretch)
-        self.near = v.clearance < self.keepout.near_distance
+        self.near = v.clearance < self.keepout.near_distance or self.arms_near
         if not self.near:
             return base
         self.counts["near"] += 1
@@ -108,6 +120,20 @@ class HeadGuard:
         vs = self.keepout.reduced_speed
         return replace(base, v_max=min(base.v_max, 0.45 * vs), w_max=min(base.w_max, 0.35 * vs / r),
                        stretch_rate=min(base.stretch_rate, 0.1 * vs / (0.5 * self.size)))
+
+    def arms(self, kins: dict, joints: dict) -> KeepOutVerdict:
+        """The keep-out verdict of the arms ``kins`` {side: ArmKinematics} at ``joints`` {side: (6,) rad or
+        None (not judged)}: the nearest arm part (``what`` "<side> arm link k" / "<side> arm clamp bar").
+        Requires a tracked eye. Sets :attr:`arms_near` for the next :meth:`limits`."""
+        best, what = float("inf"), ""
+        for side, q in joints.items():
+            if q is not None:
+                c, part = arm_keepout_clearance(self.keepout, self.eye, kins[side], q)
+                if c < best:
+                    best, what = c, f"{side} arm {part}"
+        ko = self.keepout
+        self.arms_near = best < ko.near_distance
+        return KeepOutVerdict(best, best < 0.0, what, ko.speed_limit(best))
 
     def step(self, prev_origin, prev_R, origin, R, stretch: float, dt: float) -> GuardStep:
         """Judge the step from (``prev_origin``, ``prev_R``) to (``origin``, ``R``) at ``stretch`` over ``dt``

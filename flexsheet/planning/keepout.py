@@ -45,15 +45,16 @@ from flexsheet.model.sheet import sheet_rotation
 if TYPE_CHECKING:
     from flexsheet.arm.kinematics import ArmKinematics
 
-__all__ = ["CLAMP_DEPTH", "CLAMP_REACH", "KeepOut", "KeepOutVerdict", "sheet_points", "arm_segments",
-           "arm_clearance",
-           "check_targets", "retreat_point"]
+__all__ = ["CLAMP_DEPTH", "CLAMP_REACH", "CLAMP_BAR_HALF", "KeepOut", "KeepOutVerdict", "sheet_points",
+           "arm_segments", "arm_clearance", "arm_keepout_clearance", "check_targets", "retreat_point"]
 
 #: depth of a clamp bar behind the sheet, m (ASSUMED: the clamp is not specified beyond the URDF's jaw line)
 CLAMP_DEPTH = 0.02
 #: flange face to clamp jaw line, m: the clamp's length in flexsheet/arm/rv1a.urdf (``clamp_mount``: 0.0193 m
 #: J6 origin to flange face + 0.030 m assumed clamp)
 CLAMP_REACH = 0.030
+#: m: half the clamp bar's length along the clamp frame's z axis (the sheet's v), about the clamp point
+CLAMP_BAR_HALF = 0.5 * geometry.SHEET_SIZE
 
 
 def _points(name: str, p) -> np.ndarray:
@@ -204,6 +205,26 @@ def arm_clearance(keepout: KeepOut, V, kin: ArmKinematics, q, link_radius: float
     capsules). Raises ``ValueError`` naming ``V``, ``q`` or ``link_radius``."""
     r = check_positive("link_radius", link_radius, allow_zero=True)
     return keepout.clearance_segments(V, *arm_segments(kin, q)) - r
+
+
+def arm_keepout_clearance(keepout: KeepOut, V, kin: ArmKinematics, q,
+                          link_radius: float = 0.05) -> tuple[float, str]:
+    """(clearance m, what: "link k" or "clamp bar") of one arm at joints ``q`` (6,) rad from the keep-out of
+    the eye ``V`` (3,) m: the smaller of :func:`arm_clearance` (links as ``link_radius`` capsules) and of its
+    clamp bar, the segment ±:data:`CLAMP_BAR_HALF` along the clamp frame's z axis about the clamp point. The
+    one test of an arm: each bridge refuses a target below 0 at its own margin (``hold:keep_out``), the
+    planner's head guard keeps it above 0 at its larger one. Raises ``ValueError`` naming ``V`` or ``q``."""
+    r = check_positive("link_radius", link_radius, allow_zero=True)
+    c = keepout.center(V)
+    a, b = arm_segments(kin, q)
+    d = _segment_distances(c, a, b) - r
+    k = int(np.argmin(d))
+    T = kin.fk(q)
+    p, z = T[:3, 3], T[:3, 2]
+    bar = float(_segment_distances(c, (p - CLAMP_BAR_HALF * z)[None], (p + CLAMP_BAR_HALF * z)[None])[0])
+    if bar < d[k]:
+        return bar - keepout.radius, "clamp bar"
+    return float(d[k]) - keepout.radius, f"link {k}"
 
 
 def check_targets(keepout: KeepOut, V, sheet_pts, arm_segs: Mapping | None = None, *,

@@ -25,9 +25,8 @@ Paper §V-A and Fig. 7, generalised:
   :data:`FORCE_DEPTH` deep with the object's press given, its force
   (:func:`~flexsheet.model.tension.stretch_for_force`: a sheet stiffens with depth differently from the
   object). The stretch is clamped to what the arms can apply (status says so).
-* **Limits and safety**: the pose passes :class:`flexsheet.planning.limits.RateLimiter`; clamp points are
-  checked by :class:`flexsheet.planning.limits.ReachModel` and, with an ``arm_reach``, both arms' IK
-  (:meth:`flexsheet.planning.arm_reach.ArmReach.screen`: the nearest reachable pose, ``reach:nearest``).
+* **Limits and safety**: :func:`flexsheet.planning.pose_screen.limit_and_reach`: the rate limits, the head
+  guard (sheet and arms), the reach shells and both arms' IK (the nearest reachable pose, ``reach:nearest``).
 * **Tremor**: touching, the contact and normal come from the fingertip through :class:`~flexsheet.planning.
   pose_filter.PoseFilter` (``pose_cutoff``); the depth (touch, stretch) is the raw sample's along that normal.
 
@@ -75,7 +74,6 @@ from flexsheet.model.tension import (
 from flexsheet.model.vec import (
     Vec,
     axpy,
-    cols,
     cross,
     dot,
     min_rotation,
@@ -89,6 +87,7 @@ from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
 from flexsheet.planning.pose_filter import PoseFilter
+from flexsheet.planning.pose_screen import limit_and_reach
 
 __all__ = ["FORCE_DEPTH", "TABLE_MIN_DEPTH", "SurfacePlanner"]
 
@@ -246,8 +245,8 @@ class SurfacePlanner:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
         origin = axpy(-sv, v, axpy(-su, u, q))
-        o, (nc, uc, vc), st, left, right, margin = self._limit_and_reach(origin, rot_from_cols(n, u, v),
-                                                                          tr.stretch, s.dt, status, (su, sv))
+        o, (nc, uc, vc), st, left, right, margin = limit_and_reach(self, origin, rot_from_cols(n, u, v),
+                                                                   tr.stretch, s.dt, status, (su, sv))
         mat = cfg.material
         plan = Plan(s.t, q, nc, uc, vc, o, (su, sv), st, tr.tension if st == tr.stretch else tension(st, mat),
                     tr.stiffness if st == tr.stretch else _stiffness_or_zero(st, mat, su, sv, depth), k_obj,
@@ -445,49 +444,6 @@ class SurfacePlanner:
             status.append("slip:sheet_edge")
             return max(-hu, min(hu, su)), max(-hv, min(hv, sv))
         return su, sv
-
-    def _limit_and_reach(self, origin: Vec, R, stretch: float, dt: float | None, status: list[str],
-                         offset: tuple[float, float] = (0.0, 0.0)):
-        """Rate-limit the target pose, place the clamps and screen their reach. Returns (origin, (n, u, v),
-        stretch, left, right, reach margin); ``offset`` (s_u, s_v) m: the contact on the sheet (the arms' IK
-        screen turns a pose out of reach about it). An unreachable step is undone and the last pose held."""
-        prev = None
-        if dt is None or not self.limiter.initialised:
-            self.limiter.reset(origin, R, stretch)
-            o, Rc, st, limited = origin, R, stretch, False
-        else:
-            prev = self.limiter.snapshot()
-            if self.guard is not None:
-                self.limiter.limits = self.guard.limits(self.cfg.limits, prev.origin, prev.R, prev.stretch)
-            o, Rc, st, limited = self.limiter.step(origin, R, stretch, dt)
-        if limited:
-            status.append("rate_limited")
-        if self.guard is not None and self.guard.eye is not None and prev is not None:
-            g = self.guard.step(prev.origin, prev.R, o, Rc, st, dt)
-            if g.retreat:  # the step would enter the head's keep-out (or it was lost near): back off
-                status.append(Hold.HEAD_LOST if self.guard.lost else Hold.KEEP_OUT)
-                o, Rc = tuple(float(x) for x in g.origin), tuple(tuple(float(x) for x in r) for r in g.R)
-                self.limiter.reset(o, Rc, st)
-        axes = cols(Rc)
-        left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
-        ok, margin = self.cfg.reach.reachable(left, right)
-        if ok and self.arm_reach is not None:
-            ok, o, Rc, why = self.arm_reach.screen(o, Rc, st, self.cfg.material.size,
-                                                   prev.R if prev is not None else None, offset)
-            if why:
-                status.append(why)
-            if why == "reach:nearest":
-                self.limiter.reset(o, Rc, st)
-                axes = cols(Rc)
-                left, right = clamp_points(o, axes[1], st, self.cfg.material.size)
-        if not ok:
-            status.append("unreachable")
-            if self.last is not None and prev is not None:
-                # hold the last reachable pose (at rest), keep the rolling state of the finger
-                self.limiter.restore(prev, at_rest=True)
-                L = self.last
-                return L.origin, (L.normal, L.axis_u, L.axis_v), L.stretch, L.left, L.right, margin
-        return o, axes, st, left, right, margin
 
 
 def _stiffness_or_zero(stretch: float, mat: SheetMaterial, su: float, sv: float, depth: float) -> float:

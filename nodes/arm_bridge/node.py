@@ -45,7 +45,7 @@ from flexsheet.arm.tracking import BridgeStatus, peer_holds
 from flexsheet.calibration.display_calib_file import load_display_calib
 from flexsheet.model.geometry import LEFT_BASE, RIGHT_BASE
 from flexsheet.model.timing import LAB
-from flexsheet.planning.keepout import KeepOut, arm_clearance
+from flexsheet.planning.keepout import KeepOut, arm_keepout_clearance
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.qos import QoS
 from messages import ArmJointState, ArmTarget, EyePose, topics
@@ -175,14 +175,9 @@ class ArmBridgeNode(BridgeServices, Node):
             self.tracker.keep_out = self._in_keep_out
 
     def _in_keep_out(self, q: np.ndarray) -> bool:
-        """Whether joints ``q`` put this arm's links or its clamp bar (±0.12 m along the clamp's v axis) in
-        the keep-out of the newest tracked eye."""
-        V = self._eye
-        if arm_clearance(self.keepout, V, self.kin, q) < 0.0:
-            return True
-        T = self.kin.fk(q)
-        c, v = T[:3, 3], T[:3, 2]
-        return self.keepout.clearance_segments(V, (c - 0.12 * v)[None], (c + 0.12 * v)[None]) < 0.0
+        """Whether joints ``q`` put this arm's links or its clamp bar in the keep-out of the newest tracked
+        eye (:func:`~flexsheet.planning.keepout.arm_keepout_clearance`; the planner's test, at its margin)."""
+        return arm_keepout_clearance(self.keepout, self._eye, self.kin, q)[0] < 0.0
 
     async def on_target(self, msg: ArmTarget) -> None:
         """New clamp target: IK now (or once the first controller state arrived)."""
