@@ -69,8 +69,8 @@ class JointRates:
             clamps = seg.clamps(seg.t0 + seg.duration * (k + 0.5) / self.samples, True, sides)
             for side, (T, tw, dtw) in zip(sides, clamps, strict=True):
                 Ji = self._jinv[side]                                   # (n, 6, 6)
-                rv = max(rv, float(np.max(np.abs(Ji @ tw) / self.qd_max)))
-                ra = max(ra, float(np.max(np.abs(Ji @ dtw) / self.qdd_max)))
+                rv = max(rv, float((np.abs(Ji @ tw) / self.qd_max).max()))
+                ra = max(ra, float((np.abs(Ji @ dtw) / self.qdd_max).max()))
                 if side in q:           # and at the instant's own joints: a wrist near its singularity
                     v, a, q[side] = self._along(side, T, q[side], tw, dtw)   # turns fast between the ends
                     rv, ra = max(rv, v), max(ra, a)
@@ -81,11 +81,11 @@ class JointRates:
         """(peak joint speed / ``qd_max``, peak acceleration / ``qdd_max``, the joints (6,) rad) at the
         clamp pose ``T`` (4, 4) moving at twist ``tw`` and its rate ``dtw`` (6,): the joints one Newton step
         from ``q`` (the last instant's: a few mm away), the Jacobian there. A singular one counts nothing."""
-        kin = self.kin[side]
+        rates = np.empty((6, 2))
+        rates[:, 0] = tw
+        rates[:, 1] = dtw
         try:
-            qn = kin.track(T, q, tw)[0]
-            v = np.linalg.solve(kin.jacobian(qn), np.column_stack([tw, dtw]))
+            qn, v = self.kin[side].step_rates(T, q, tw, rates)
         except np.linalg.LinAlgError:
             return 0.0, 0.0, q
-        return (float(np.max(np.abs(v[:, 0]) / self.qd_max)), float(np.max(np.abs(v[:, 1]) / self.qdd_max)),
-                qn)
+        return float((np.abs(v[:, 0]) / self.qd_max).max()), float((np.abs(v[:, 1]) / self.qdd_max).max()), qn

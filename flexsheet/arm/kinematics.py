@@ -138,6 +138,7 @@ class ArmKinematics:
         self._M_tool_link = self._M_link_tool.inverse()
         # a clamp-frame twist in the URDF chain's link frame (the inverse of jacobian()'s action matrix)
         self._A_link_tool = self._M_link_tool.toActionMatrix()
+        self._A_tool_link = self._M_tool_link.toActionMatrix()      # jacobian()'s, computed once
 
     # ------------------------------------------------------------------ forward kinematics
     def check_q(self, q) -> np.ndarray:
@@ -178,11 +179,12 @@ class ArmKinematics:
 
     def jacobian(self, q) -> np.ndarray:
         """(6, 6) geometric Jacobian of the clamp frame, rows (v, ω) in the clamp frame (``pin.LOCAL``)."""
-        q = self.check_q(q)
+        return self._jacobian(self.check_q(q))
+
+    def _jacobian(self, q: np.ndarray) -> np.ndarray:
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
-        J = pin.getFrameJacobian(self.model, self.data, self.fid, pin.LOCAL)
-        return self._M_tool_link.toActionMatrix() @ J
+        return self._A_tool_link @ pin.getFrameJacobian(self.model, self.data, self.fid, pin.LOCAL)
 
     def manipulability(self, q) -> float:
         """Yoshikawa's manipulability sqrt(det(J Jᵀ)) of the clamp frame at ``q`` (units m³/rad⁶-mixed).
@@ -296,6 +298,22 @@ class ArmKinematics:
         rhs[:, 1] = self._A_link_tool @ twist
         sol = np.linalg.solve(J, rhs)
         return q + sol[:, 0], sol[:, 1], float(np.abs(err).max()), abs(float(np.linalg.det(J)))
+
+    def step_rates(self, T_target: np.ndarray, q: np.ndarray, twist: np.ndarray,
+                   rates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The joints one Newton step from ``q`` (6,) rad toward the clamp pose ``T_target`` (4, 4, display
+        frame, m) moving at ``twist`` (6,) (the step of :meth:`track`), and the joint rates (6, k) that give
+        the clamp-frame rates ``rates`` (6, k) (e.g. a twist and its rate: rad/s, rad/s²) through the
+        Jacobian (:meth:`jacobian`) at those joints. No checks (the planner's sampled path). Raises
+        ``numpy.linalg.LinAlgError`` at an exact singularity."""
+        T_base_link = self.T_base_display @ T_target @ self.T_link_tool
+        M_goal = pin.SE3(T_base_link[:3, :3], T_base_link[:3, 3])
+        J = self._jacobian_placement(q)
+        rhs = np.empty((6, 2))
+        rhs[:, 0] = pin.log6(self.data.oMf[self.fid].actInv(M_goal)).vector
+        rhs[:, 1] = self._A_link_tool @ twist
+        qn = q + np.linalg.solve(J, rhs)[:, 0]
+        return qn, np.linalg.solve(self._jacobian(qn), rates)
 
 
 def clamp_joints(kin: dict, T_left: np.ndarray, T_right: np.ndarray) -> dict[str, np.ndarray]:

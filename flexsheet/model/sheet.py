@@ -71,7 +71,13 @@ def sheet_rotation(normal, axis_u) -> np.ndarray:
     u = check_unit("axis_u", axis_u, tol=1e-6)
     if abs(float(n @ u)) > 1e-6:
         raise ValueError(f"normal and axis_u must be orthogonal, got dot={float(n @ u):.3g}")
-    return np.column_stack([n, u, np.cross(n, u)])
+    R = np.empty((3, 3))
+    R[:, 0] = n
+    R[:, 1] = u
+    n0, n1, n2 = n.tolist()
+    u0, u1, u2 = u.tolist()
+    R[:, 2] = (n1 * u2 - n2 * u1, n2 * u0 - n0 * u2, n0 * u1 - n1 * u0)    # n × u (np.cross's products)
+    return R
 
 
 def clamp_half_span(stretch: float, size: float = geometry.SHEET_SIZE) -> float:

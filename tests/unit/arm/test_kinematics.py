@@ -196,6 +196,27 @@ def test_a_newton_step_converges_quadratically_and_its_rate_moves_the_clamp_at_t
     assert np.abs(T - kin.fk(q)).max() < 1e-14 and abs(m - kin.manipulability(q)) < 1e-12
 
 
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_step_rates_steps_as_track_and_its_rates_move_the_clamp_at_the_given_twists(side):
+    kin = ArmKinematics(side, LEFT_BASE if side == "left" else RIGHT_BASE)
+    rng = np.random.default_rng(11)
+    q = home_joints(side)
+    dq = rng.normal(size=6) * 1e-2
+    T_goal = kin.fk(q + dq)
+    twist = rng.normal(size=6) * 0.1
+    rates = np.column_stack([twist, rng.normal(size=6)])
+    qn, v = kin.step_rates(T_goal, q, twist, rates)
+    assert np.array_equal(qn, kin.track(T_goal, q, twist)[0])      # the same Newton step, bit for bit
+    assert np.abs(qn - (q + dq)).max() < 1e-3 and v.shape == (6, 2)
+    # each column of rates is the clamp-frame twist its joint rates give at the stepped joints (finite
+    # differences of the FK: translation part)
+    h = 1e-7
+    T0 = kin.fk(qn)
+    for k in range(2):
+        T1 = kin.fk(qn + h * v[:, k])
+        assert np.allclose(T0[:3, :3].T @ (T1[:3, 3] - T0[:3, 3]) / h, rates[:3, k], atol=1e-5)
+
+
 def test_an_iterate_that_lands_exactly_singular_is_damped_not_raised():
     # found by seeding the right arm at random for a sheet turned 40 deg about +z: the undamped step's
     # Jacobian became exactly singular (numpy.linalg.LinAlgError crashed the caller)
