@@ -388,6 +388,8 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet bench sim --duration 20 --out docs/figures/bench",
         "flexsheet bench sim --set scene=launch/scenes/organ.yaml --json",
         "flexsheet bench sim --duration 20 --profile --out docs/figures/bench",
+        "flexsheet bench replay --out docs/figures/bench",
+        "flexsheet bench replay --bag out/sim/sim.mcap --runs 3 --json",
     )},
 }
 

@@ -300,6 +300,9 @@ class Container:
             return
         data = {"container": self.name, "pid": os.getpid(), "wall_s": wall, "process_cpu_s": cpu,
                 "nodes": {m.name: {"handler_cpu_s": m.cpu_s, "restarts": m.restarts} for m in self.members},
+                # a lockstep replay's figures (flexsheet.runtime.lockstep.LockstepStats; None on other clocks)
+                "lockstep": (self.bus.lockstep.stats.as_dict()
+                             if self.bus.lockstep is not None and not self.bus.clock.live else None),
                 "note": "handler_cpu_s: CPU of each node's handlers and timer callbacks (thread time; an "
                         "async one's own steps); the rest of process_cpu_s is shared: the loop, decoding, "
                         "threads"}
