@@ -78,7 +78,7 @@ class HeadGuard:
         self.lost = False
         #: the last judged sheet (or arms, :meth:`arms`) was within ``near_distance`` of the keep-out
         self.near = False
-        #: the last arms judged (:meth:`arms`) were within ``near_distance`` of the keep-out
+        #: the arms of the last plan were within ``near_distance`` of the keep-out (its caller sets it)
         self.arms_near = False
         self.counts = {"near": 0, "retreat": 0}
 
@@ -124,16 +124,14 @@ class HeadGuard:
     def arms(self, kins: dict, joints: dict) -> KeepOutVerdict:
         """The keep-out verdict of the arms ``kins`` {side: ArmKinematics} at ``joints`` {side: (6,) rad or
         None (not judged)}: the nearest arm part (``what`` "<side> arm link k" / "<side> arm clamp bar").
-        Requires a tracked eye. Sets :attr:`arms_near` for the next :meth:`limits`."""
+        Requires a tracked eye."""
         best, what = float("inf"), ""
         for side, q in joints.items():
             if q is not None:
                 c, part = arm_keepout_clearance(self.keepout, self.eye, kins[side], q)
                 if c < best:
                     best, what = c, f"{side} arm {part}"
-        ko = self.keepout
-        self.arms_near = best < ko.near_distance
-        return KeepOutVerdict(best, best < 0.0, what, ko.speed_limit(best))
+        return KeepOutVerdict(best, best < 0.0, what, self.keepout.speed_limit(best))
 
     def step(self, prev_origin, prev_R, origin, R, stretch: float, dt: float) -> GuardStep:
         """Judge the step from (``prev_origin``, ``prev_R``) to (``origin``, ``R``) at ``stretch`` over ``dt``

@@ -34,7 +34,11 @@ class PlannerConfig:
     corner of the low-pass on the fingertip that forms the sheet's orientation and contact point, so the
     finger's tremor does not turn the sheet (0: off; the push depth is not filtered), ``pose_velocity_cutoff``
     Hz: the corner of the smoothed velocity whose lead cancels that low-pass's lag
-    (:class:`flexsheet.planning.pose_filter.PoseFilter`). Raises ``ValueError`` on bad values."""
+    (:class:`flexsheet.planning.pose_filter.PoseFilter`). The sheet's in-plane rotation ψ between touches
+    (:class:`flexsheet.planning.pose_choice.PoseChoice`, with the arms' IK): candidates every ``psi_step`` rad
+    within ±``psi_range`` rad of the paper's rule (0: the paper's rule alone), their look-ahead rolls up to
+    ``psi_lookahead`` rad, a new choice only when better by ``psi_hysteresis`` (score units: a share of a
+    joint's range), chosen every ``psi_period`` s. Raises ``ValueError`` on bad values."""
 
     touch_distance: float = 0.002
     release_distance: float = 0.006
@@ -51,6 +55,11 @@ class PlannerConfig:
     future_stamp_tolerance: float = 0.5
     pose_cutoff: float = 3.0
     pose_velocity_cutoff: float = 3.0
+    psi_step: float = math.radians(10.0)
+    psi_range: float = math.radians(40.0)
+    psi_lookahead: float = 0.6
+    psi_hysteresis: float = 0.05
+    psi_period: float = 0.1
     material: SheetMaterial = field(default_factory=SheetMaterial)
     limits: MotionLimits = field(default_factory=MotionLimits)
     reach: ReachModel = field(default_factory=ReachModel)
@@ -76,5 +85,11 @@ class PlannerConfig:
             raise ValueError(f"pose_cutoff must be in [0, 50] Hz, got {self.pose_cutoff!r}")
         if not (math.isfinite(self.pose_velocity_cutoff) and 0.0 < self.pose_velocity_cutoff <= 50.0):
             raise ValueError(f"pose_velocity_cutoff must be in (0, 50] Hz, got {self.pose_velocity_cutoff!r}")
+        if not (math.isfinite(self.psi_range) and 0.0 <= self.psi_range <= math.pi / 2 + 1e-9):
+            raise ValueError(f"psi_range must be in [0, pi/2] rad, got {self.psi_range!r}")
+        for k in ("psi_step", "psi_lookahead", "psi_period"):
+            object.__setattr__(self, k, check_positive(k, getattr(self, k)))
+        if not (math.isfinite(self.psi_hysteresis) and self.psi_hysteresis >= 0.0):
+            raise ValueError(f"psi_hysteresis must be finite and >= 0, got {self.psi_hysteresis!r}")
         if len(self.u_ref) != 3 or not finite(self.u_ref) or norm(self.u_ref) < 1e-9:
             raise ValueError(f"u_ref must be a non-zero finite (3,) vector, got {self.u_ref!r}")

@@ -88,6 +88,7 @@ def keep_arms_out(p, pose: tuple, dt: float | None, status: list[str]) -> tuple:
     n, u = np.asarray(axes[0], float), np.asarray(axes[1], float)
     ar.solve(*clamp_poses(np.asarray(o, float), n, u, st, size), commit=False)
     v = g.arms(ar.kin, ar.solution())
+    g.arms_near = v.clearance < g.keepout.near_distance
     if not v.inside:
         return pose
     status.extend((Hold.KEEP_OUT, f"keep_out:{v.what}"))

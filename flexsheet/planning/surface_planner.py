@@ -5,8 +5,9 @@ Paper §V-A and Fig. 7, generalised:
 * **Away** (fingertip farther than ``touch_distance`` from the surface): the contact point A is the centre-ray
   hit (:meth:`flexsheet.model.shape_base.Shape.project`; closest point for non-convex meshes) and the sheet is
   commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis ``axis_u`` is
-  the reference direction (``u_ref``, +y: the clamp line at home) projected onto the tangent plane. A rolled
-  offset left from a previous touch decays with time constant ``recentre_time``.
+  the reference direction (``u_ref``, +y: the clamp line at home) projected onto the tangent plane, turned
+  by the ψ the arms' IK chooses (:class:`~flexsheet.planning.pose_choice.PoseChoice`). A rolled offset left
+  from a previous touch decays with time constant ``recentre_time``.
 * **Touching** (within ``touch_distance``, released beyond ``release_distance``: hysteresis): the sheet
   rolls on the object without slip. Each update the contact moves on the surface from B₋ to B; the sheet
   rotates by the smallest rotation taking the old normal to the new one (rolling without spin, i.e.
@@ -86,6 +87,7 @@ from flexsheet.model.vec import (
 from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
+from flexsheet.planning.pose_choice import PoseChoice
 from flexsheet.planning.pose_filter import PoseFilter
 from flexsheet.planning.pose_screen import limit_and_reach
 
@@ -128,6 +130,9 @@ class SurfacePlanner:
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
         self.pose_filter = PoseFilter(self.cfg.pose_cutoff, self.cfg.pose_velocity_cutoff)
+        #: ψ between touches (:class:`~flexsheet.planning.pose_choice.PoseChoice`); None: the paper's rule
+        self.pose_choice = (PoseChoice(shape, self.cfg, arm_reach, guard)
+                            if arm_reach is not None and self.cfg.psi_range > 0.0 else None)
         self._eps_max = max_stretch_within_force(self.cfg.material)
         #: the arms' pull limit at their pose, N (None: only the
         #: material's ``max_force``), :meth:`set_pull_limit`
@@ -181,6 +186,8 @@ class SurfacePlanner:
         self.touching = False
         self.limiter.clear()
         self.pose_filter.reset()
+        if self.pose_choice is not None:
+            self.pose_choice.reset()
         self._tcache: tuple[float, float, float, float, TensionResult] | None = None
         self._k_model: float | None = None
         self.counts: dict[str, int] = {}
@@ -239,6 +246,9 @@ class SurfacePlanner:
         was_touching = self.touching
         self._touch(dist)
         su, sv, u = self._roll(q, n, s.dt, was_touching)
+        if self.pose_choice is not None and not (self.touching and was_touching):   # ψ: not while rolling
+            st0 = self.last.stretch if self.last is not None else cfg.material.min_stretch
+            u = self.pose_choice.axis(s.t, q, n, (su, sv), st0, not self.touching) or u
         v = cross(n, u)
         tr = self._stretch(k_obj, table_force, su, sv, depth, object_press)
         if tr.saturated:
