@@ -49,15 +49,14 @@ class ArmCommand:
     {side: (6,) rad IK of that pose, or an empty array where it did not solve} for the bridges to check
     instead of solving; ``pull`` N: the sheet's clamp force at the plan's stretch; ``motion``:
     :class:`flexsheet.arm.sheet_motion.SheetSegment` fields for :class:`messages.ArmTarget` (``{}`` when the
-    motion could not be shaped: the bridges then stream to the goal joint by joint); ``say``: a line to log
-    (a new pull limit) or ''; ``warn``: a warning to log (the motion's first failure) or ''."""
+    motion could not be shaped: the bridges then stream to the goal joint by joint); ``warn``: a warning to
+    log (the motion's first failure) or ''."""
 
     left: np.ndarray
     right: np.ndarray
     joints: dict
     pull: float
     motion: dict
-    say: str = ""
     warn: str = ""
 
 
@@ -86,22 +85,27 @@ class ArmCommander:
                                            m.min_stretch, m.size))
 
     def command(self, plan: Plan, now: float, limits: MotionLimits,
-                held: Callable[[float], tuple | None]) -> tuple[ArmCommand, float | None]:
-        """(the command for ``plan`` at time ``now`` s, the pull limit N for the next plans or None).
-        ``limits``: the planner's current motion limits; ``held(size)``: the sheet as the arms' measured
-        clamps hold it ((origin (3,), R (3, 3), strain) or None), read only where a motion starts from
-        rest."""
+                held: Callable[[float], tuple | None]) -> ArmCommand:
+        """The command for ``plan`` at time ``now`` s. ``limits``: the planner's current motion limits;
+        ``held(size)``: the sheet as the arms' measured clamps hold it ((origin (3,), R (3, 3), strain) or
+        None), read only where a motion starts from rest. The pull limit at its targets is
+        :meth:`cap_pull`'s, once the command is sent."""
         Tl, Tr = plan.clamp_matrices()
-        limit, said = self._cap_pull(Tl, Tr)                  # for the next plans, at these targets
+        solved = self.pull_guard.solve(Tl, Tr)
         motion, failed = self._motion(plan, now, limits, held)
         pull = clamp_force(plan.stretch, self.material)
-        joints = {s: (np.zeros(0) if q is None else q) for s, q in self.pull_guard.solved.items()}
-        return ArmCommand(Tl, Tr, joints, pull, motion, said, failed), limit
+        joints = {s: (np.zeros(0) if q is None else q) for s, q in solved.items()}
+        return ArmCommand(Tl, Tr, joints, pull, motion, failed)
 
-    def _cap_pull(self, T_left: np.ndarray, T_right: np.ndarray) -> tuple[float | None, str]:
-        """``pull_margin`` × the arms' torque-limited pull at these targets, and a line when the limiting
-        joint changes or the limit by more than 10 %."""
-        limit = self.pull_guard.limit(T_left, T_right)
+    def cap_pull(self) -> tuple[float | None, str]:
+        """(``pull_margin`` × the arms' torque-limited pull N at the last command's targets, or None; a line
+        when the limiting joint changes or the limit by more than 10 %, else ''): the next plans' cap."""
+        return self._cap_pull(None, None)
+
+    def _cap_pull(self, T_left: np.ndarray | None, T_right: np.ndarray | None) -> tuple[float | None, str]:
+        """:meth:`cap_pull` at these targets (None: at the joints solved last)."""
+        limit = (self.pull_guard.limit_at_solved() if T_left is None
+                 else self.pull_guard.limit(T_left, T_right))
         side, joint, _ = self.pull_guard.limiting()
         said = self._pull_said
         if limit is not None and (said is None or said[0] != joint or abs(limit - said[1]) > 0.1 * said[1]):

@@ -206,11 +206,16 @@ class PlannerStage:
         return plan, line
 
     def command(self, plan: Plan, now: float, held: Callable[[float], tuple | None]) -> ArmCommand:
-        """Both arms' command for ``plan`` (:meth:`ArmCommander.command`, under the planner's current limits);
-        the pull limit at its targets caps the next plans."""
-        cmd, limit = self.commander.command(plan, now, self.planner.limiter.limits, held)
+        """Both arms' command for ``plan`` (:meth:`ArmCommander.command`, under the planner's current
+        limits). Call :meth:`cap_pull` once it is sent."""
+        return self.commander.command(plan, now, self.planner.limiter.limits, held)
+
+    def cap_pull(self) -> str:
+        """Cap the next plans' pull at the arms' torque-limited pull at the last command's targets
+        (:meth:`ArmCommander.cap_pull`); a line to log when the limit moved, else ''."""
+        limit, said = self.commander.cap_pull()
         self.planner.set_pull_limit(limit)
-        return cmd
+        return said
 
     def _note_source(self, source: str) -> str:
         """The stiffness' source in words when it changed, else ''."""

@@ -50,10 +50,22 @@ class PullGuard:
         """``margin`` × the smaller arm's largest pull (N) at the IK solutions of the clamp targets (4, 4); an
         arm whose target IK does not solve keeps its last figure (its bridge refuses that target anyway). None
         while no arm's limit is known (no joint loaded)."""
+        self.solve(T_left, T_right)
+        return self.limit_at_solved()
+
+    def solve(self, T_left: np.ndarray, T_right: np.ndarray) -> dict[str, np.ndarray | None]:
+        """The clamp targets' (4, 4) IK (the reach's one solve per arm, which moves its seeds): ``solved``,
+        side → (6,) rad or None where it did not solve."""
         for side, res in self.reach.solve(T_left, T_right).items():
             self.solved[side] = res.q if res.ok else None
-            if res.ok:
-                self.pull[side], self.joint[side] = max_pull(self.kin[side], res.q)
+        return self.solved
+
+    def limit_at_solved(self) -> float | None:
+        """:meth:`limit` at the joints :meth:`solve` found last (an arm that did not solve keeps its last
+        figure)."""
+        for side, q in self.solved.items():
+            if q is not None:
+                self.pull[side], self.joint[side] = max_pull(self.kin[side], q)
         f = min(self.pull.values())
         return self.margin * f if math.isfinite(f) else None
 

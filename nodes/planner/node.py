@@ -231,12 +231,13 @@ class PlannerNode(Node):
             object_stiffness=float(plan.object_stiffness), touching=bool(plan.touching), status=plan.status,
             source_stamp=float(source_stamp)))
         cmd = self.stage.command(plan, self.now(), self._held_sheet)
-        if cmd.say:
-            self.log.info("%s", cmd.say)
         if cmd.warn:
             self.log.warning("%s", cmd.warn)
         for pub, arm, pose in ((self.pub_left, "left", cmd.left), (self.pub_right, "right", cmd.right)):
             pub.publish(ArmTarget(header=pub.header("display", st.stamp), arm=arm, pose=pose, pull=cmd.pull,
                                   source_stamp=float(source_stamp), status=plan.status,
                                   joints=cmd.joints[arm], **cmd.motion))
+        said = self.stage.cap_pull()            # the next plans' cap: after the targets are on their way
+        if said:
+            self.log.info("%s", said)
 

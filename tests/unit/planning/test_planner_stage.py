@@ -60,6 +60,7 @@ def test_one_plan_gives_both_arms_one_motion_its_pull_and_the_next_plans_cap():
         plan, _ = stage.plan(t, t, np.array([-R + R * np.cos(0.3), 0.0, R * np.sin(0.3)]))
     assert plan is not None and plan.touching
     cmd = stage.command(plan, 5 / 48.0, lambda size: None)
+    stage.cap_pull()                                             # the next plans' cap, once it is sent
     Tl, Tr = plan.clamp_matrices()
     np.testing.assert_allclose(cmd.left, Tl)
     np.testing.assert_allclose(cmd.right, Tr)
