@@ -227,11 +227,17 @@ class Bus:
     def _on_wire(self, frames: list) -> None:
         t = frames[0]
         for node, _ in self.targets(t if type(t) is bytes else bytes(t)):
-            node._on_frames(frames)
+            node._dispatch.frames(frames)
 
     def _drain_sub(self) -> None:
+        """Hand what the SUB sockets hold to the nodes; then each node calls the async handlers of what it
+        queued (:meth:`flexsheet.runtime.subscription.Dispatcher.drained`)."""
         if self.sub is not None:
-            self.sub.drain(self._on_wire)
+            try:
+                self.sub.drain(self._on_wire)
+            finally:
+                for node in tuple(self.nodes):
+                    node._dispatch.drained()
 
 
 def _is_raw(node: Node) -> bool:

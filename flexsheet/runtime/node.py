@@ -11,12 +11,14 @@ A node is a thin shell around a pure algorithm module::
         self.on_timer) def on_fingertip(self, msg): ...            # sync: runs in this subscription's worker
         thread
 
-Threading model: the asyncio loop owns the sockets' reads. Each subscription has its own queue and consumer:
-an ``async def`` handler runs on the loop (a consumer task), a plain ``def`` handler runs in the
-subscription's own worker thread (one thread per subscription, so messages of one topic stay in order and a
-slow handler never stalls the loop or other topics; the thread waits on its queue, so a message costs one
-thread wake-up and no loop iteration). :meth:`~flexsheet.runtime.publisher.Publisher.publish` is thread-safe:
-from a worker thread it sends directly (the publisher socket has a lock), without waking the loop.
+Threading model: the asyncio loop owns the sockets' reads. Each subscription has its own queue (QoS applies
+there) and consumer. An ``async def`` handler is called on the loop straight from the end of the socket drain
+that queued its messages (in-process messages: on the loop's next iteration), in order; a call that awaits
+finishes in a task and what arrives meanwhile queues for it (never two calls at once for one subscription:
+:class:`~flexsheet.runtime.subscription.Dispatcher`). A plain ``def`` handler runs in the subscription's own
+worker thread (one per subscription: messages of one topic stay in order and a slow handler never stalls the
+loop or other topics; a message costs one thread wake-up). ``Publisher.publish`` is thread-safe: from a worker
+thread it sends directly (the publisher socket has a lock), without waking the loop.
 
 Publishing: a message is encoded once, and only when a subscriber outside this process may want it (the
 publisher socket tracks its subscriptions, :class:`flexsheet.runtime.zmq.xpub.XPub`) or the topic is latched.
@@ -59,7 +61,7 @@ from flexsheet.runtime.discovery import announce, withdraw
 from flexsheet.runtime.publisher import Publisher
 from flexsheet.runtime.qos import QoS
 from flexsheet.runtime.services import ParamServices, ServiceServer, topic_pub
-from flexsheet.runtime.subscription import Subscription, SubscriptionWorker
+from flexsheet.runtime.subscription import Dispatcher, Subscription, SubscriptionWorker
 from flexsheet.runtime.transport import Transport
 from flexsheet.runtime.zmq.transport import ZmqTransport
 from flexsheet.runtime.zmq.xpub import SMALL_MESSAGE_BYTES
@@ -124,6 +126,7 @@ class Node:
         self._publishers: dict[str, Publisher] = {}
         self._subs: dict[str, list[Subscription]] = {}
         self._subs_b: dict[bytes, list[Subscription]] = {}
+        self._dispatch = Dispatcher(self._on_frames)  # calls the async handlers
         self._timers: list = []
         self._stop: asyncio.Event | None = None  # created in run(), inside the loop
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -409,7 +412,7 @@ class Node:
         if install_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._loop.add_signal_handler(sig, self._stop.set)
-        await self.transport.start(self._on_frames)
+        await self._dispatch.start(self.transport)
         self._hb_pub = self.publisher(T.DIAGNOSTICS)
         try:
             try:

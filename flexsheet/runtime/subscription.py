@@ -1,7 +1,8 @@
 """One typed subscription of a node (:class:`Subscription`, made by
-:meth:`flexsheet.runtime.node.Node.subscribe`): its queue and QoS, its consumer (a task on the loop for an
-``async def`` handler, its own worker thread, :class:`SubscriptionWorker`, for a plain ``def``) and its
-counters. See :mod:`flexsheet.runtime.node` for the threading model."""
+:meth:`flexsheet.runtime.node.Node.subscribe`): its queue and QoS, its consumer (an ``async def`` handler is
+called on the loop by the node once messages are queued, :meth:`Subscription.dispatch`; a plain ``def`` runs
+in its own worker thread, :class:`SubscriptionWorker`) and its counters. See :mod:`flexsheet.runtime.node` for
+the threading model."""
 
 from __future__ import annotations
 
@@ -21,9 +22,10 @@ from flexsheet.runtime.qos import KEEP_ALL_DEPTH, QoS
 from messages import Message, Topic
 from messages import topics as T
 
-__all__ = ["Subscription", "SubscriptionWorker", "Sampled"]
+__all__ = ["Subscription", "SubscriptionWorker", "Sampled", "Direct", "Dispatcher"]
 
 _thread_time = time.thread_time
+_current_task = asyncio.current_task
 
 
 class SubscriptionWorker(threading.Thread):
@@ -54,6 +56,104 @@ class Sampled:
         self.sub.close()
 
 
+class Direct(Sampled):
+    """The consumer of an ``async def`` handler's subscription: no task waits between messages; the node calls
+    :meth:`Subscription.dispatch` when messages are queued. ``done()``: closed; ``cancel()``: close (a handler
+    call suspended in an await is cancelled)."""
+
+
+class Dispatcher:
+    """Calls a node's async handlers (on its loop): the subscriptions with queued items are dispatched
+    (:meth:`Subscription.dispatch`) at the end of the transport's drain in progress (:meth:`drained`), once
+    their QoS has seen the whole batch, else (a message from the node's container, a tool) on the loop's next
+    iteration. ``on_frames``: the node's handler of wire frames."""
+
+    __slots__ = ("on_frames", "loop", "ready", "draining", "pending")
+
+    def __init__(self, on_frames: Callable[[list], None]) -> None:
+        self.on_frames = on_frames
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.ready: list[Subscription] = []
+        self.draining = False
+        self.pending = False
+
+    async def start(self, transport: Any) -> None:
+        """Start ``transport`` on the running loop; one with an ``on_drained`` hook hands its drains in
+        batches (:meth:`frames`, then :meth:`drained`)."""
+        self.loop = asyncio.get_running_loop()
+        if hasattr(transport, "on_drained"):
+            transport.on_drained = self.drained
+            await transport.start(self.frames)
+        else:
+            await transport.start(self.on_frames)
+
+    def frames(self, frames: list) -> None:
+        """One message of a transport's drain (on the loop)."""
+        self.draining = True
+        self.on_frames(frames)
+
+    def drained(self) -> None:
+        """The end of a transport's drain (on the loop): call the handlers of what it queued now when the
+        drain runs as a loop callback (a ready socket); inside a task (a ``subscribe`` during ``setup``, the
+        safety poll) on the loop's next iteration, so that no handler runs inside another's task."""
+        self.draining = False
+        if self.ready:
+            if _current_task(self.loop) is None:
+                self._run()
+            else:
+                self._later()
+
+    def mark(self, sub: Subscription) -> None:
+        """``sub`` (idle) has queued items (on the loop)."""
+        self.ready.append(sub)
+        if not self.draining:
+            self._later()
+
+    def _later(self) -> None:
+        if not self.pending:
+            self.pending = True
+            self.loop.call_soon(self._soon)
+
+    def _soon(self) -> None:
+        self.pending = False
+        if self.ready:
+            self._run()
+
+    def _run(self) -> None:
+        ready, self.ready = self.ready, []
+        for sub in ready:     # one marked again meanwhile waits for the next call
+            sub.dispatch()
+
+
+class _Rest:
+    """Awaitable: the rest of a handler coroutine whose first step yielded ``first`` (a future it waits on),
+    stepped on as :func:`flexsheet.runtime.cpu_time.timed` does: each step's thread CPU time, s, is added to
+    ``counter``."""
+
+    __slots__ = ("coro", "first", "counter")
+
+    def __init__(self, coro: Any, first: Any, counter: CpuCounter) -> None:
+        self.coro, self.first, self.counter = coro, first, counter
+
+    def __await__(self):
+        coro, counter, yielded = self.coro, self.counter, self.first
+        while True:
+            try:
+                value, error = (yield yielded), None
+            except BaseException as exc:      # cancellation or a throw into the awaiting task: pass it on
+                value, error = None, exc
+            t0 = _thread_time()
+            try:
+                yielded = coro.send(value) if error is None else coro.throw(error)
+            except StopIteration as stop:
+                counter.s += _thread_time() - t0
+                return stop.value
+            except BaseException:
+                counter.s += _thread_time() - t0
+                raise
+            counter.s += _thread_time() - t0
+
+
 class Subscription:
     """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS,
     handler, consumer (task or worker thread) and statistics.
@@ -75,7 +175,6 @@ class Subscription:
         self.queue: collections.deque = collections.deque()
         self.sampled = handler is None
         self.is_async = inspect.iscoroutinefunction(handler)
-        self.event = asyncio.Event() if self.is_async else None
         self._wake: queue.SimpleQueue | None = None if self.is_async or self.sampled else queue.SimpleQueue()
         self._held: Any = None          # sampled: the newest item, and the one decoded last with its message
         self._held_read: Any = None
@@ -83,22 +182,28 @@ class Subscription:
         self._read_lock = threading.Lock()
         self._taken: Message | None = None     # sampled: the message take() applied last
         self._lock = threading.Lock()
-        self._waiting = False
+        self._busy = False      # async handler: a call in progress (its queue waits for it)
+        self._marked = False    # async handler: in the node's list of subscriptions to dispatch
+        self._rest: asyncio.Task | None = None  # async handler: a call that awaited, finishing in a task
+        self._suspended: Any = None  # ... its coroutine until that task first runs
+        self._queue_drops = 0   # queue drops since the last item taken (not lost on the wire)
         self._closed = False
         self.stats = TopicCounters()
         self.cpu_s = 0.0  # CPU time of the sync handler (its worker thread), s
         self.last_seq: int | None = None
         self.last_meta: Any = None
-        # the consumer, once started (both have done(), cancel())
-        self.task: asyncio.Task | SubscriptionWorker | None = None
+        # the consumer, once started (all have done(), cancel())
+        self.task: Direct | Sampled | SubscriptionWorker | None = None
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
-        """Start the consumer: a task on ``loop`` (async handler), the worker thread (sync handler), or none
-        (sampled)."""
+        """Start the consumer: none runs for an async handler (:class:`Direct`: items already queued are
+        dispatched on ``loop`` soon) or a sampled subscription; the worker thread for a sync handler."""
         if self.sampled:
             self.task = Sampled(self)
         elif self.is_async:
-            self.task = loop.create_task(self.run())
+            self.task = Direct(self)
+            if self.queue:
+                self._mark()
         else:
             self.task = SubscriptionWorker(self)
             self.task.start()
@@ -138,35 +243,91 @@ class Subscription:
             if len(q) >= self.depth:
                 q.popleft()
                 self.stats.dropped += 1
+                self._queue_drops += 1
                 q.append(item)
                 return  # the dropped item's wake-up token serves this one
             q.append(item)
         self._wake.put(None)
 
     def _push_async(self, item: Any) -> None:
+        """Queue ``item`` (on the loop); an idle subscription asks the node to dispatch it."""
         q = self.queue
         if len(q) >= self.depth:
             q.popleft()
             self.stats.dropped += 1
+            self._queue_drops += 1
         q.append(item)
-        if self._waiting:
-            self.event.set()
+        if not (self._busy or self._marked or self._closed) and self.task is not None:
+            self._mark()
 
-    async def run(self) -> None:
-        """Consumer task of an async handler."""
+    def _mark(self) -> None:
+        self._marked = True
+        self.node._dispatch.mark(self)
+
+    def dispatch(self) -> None:
+        """Handle the queued items in order, on the loop, by calling the async handler straight away (no task,
+        no event). A call that awaits something not yet done continues in a task; items that arrive meanwhile
+        wait in the queue (QoS applies) and that task handles them, so the handler is never re-entered."""
+        self._marked = False
+        if self._busy or self._closed:
+            return
         q = self.queue
-        while True:
-            if not q:
-                self.event.clear()
-                self._waiting = True
-                try:
-                    await self.event.wait()
-                finally:
-                    self._waiting = False
-                continue
-            msg = self._accept(q.popleft())
-            if msg is not None:
-                await self._call_async(msg)
+        self._busy = True
+        try:
+            while q:
+                msg = self._accept(q.popleft())
+                if msg is None:
+                    continue
+                rest = self._step(msg)
+                if rest is not None:
+                    self._suspended = rest[0]
+                    self._rest = self.node._loop.create_task(self._finish(*rest))
+                    return
+        finally:
+            self._busy = self._rest is not None
+
+    def _step(self, msg: Message) -> tuple | None:
+        """Run the handler on ``msg`` up to its first suspension: None when it returned (or raised: counted),
+        else ``(coroutine, what it yielded, CPU s so far)``."""
+        t0 = _thread_time()
+        try:
+            coro = self.handler(msg)
+            yielded = coro.send(None)
+        except StopIteration:
+            self.cpu_s += _thread_time() - t0
+            return None
+        except ValueError as exc:  # InputRejected included
+            self.cpu_s += _thread_time() - t0
+            self.reject(str(exc))
+            return None
+        except Exception:  # noqa: BLE001 - a handler bug must not kill the node; logged with traceback
+            self.cpu_s += _thread_time() - t0
+            self.node._handler_error(self.topic.name)
+            return None
+        return coro, yielded, _thread_time() - t0
+
+    async def _finish(self, coro: Any, yielded: Any, spent: float) -> None:
+        """The task of a handler call that awaited: its rest, then the items queued meanwhile, in order."""
+        self._suspended = None
+        cpu = CpuCounter()
+        cpu.s = spent
+        try:
+            try:
+                await _Rest(coro, yielded, cpu)
+            except ValueError as exc:
+                self.reject(str(exc))
+            except Exception:  # noqa: BLE001
+                self.node._handler_error(self.topic.name)
+            finally:
+                self.cpu_s += cpu.s
+            q = self.queue
+            while q and not self._closed:
+                msg = self._accept(q.popleft())
+                if msg is not None:
+                    await self._call_async(msg)
+        finally:
+            self._rest = None
+            self._busy = False
 
     def _work(self) -> None:
         """Worker thread of a sync handler: one wake-up token per queued item."""
@@ -252,7 +413,9 @@ class Subscription:
         last = self.last_seq
         if (last is not None and seq > last + 1 and self.qos is QoS.KEEP_ALL
                 and self.topic.name != T.DIAGNOSTICS.name):  # every node publishes /diagnostics
-            self.stats.dropped += seq - last - 1  # lost on the wire (HWM)
+            # lost on the wire (HWM): the gap less what the queue dropped (counted there)
+            self.stats.dropped += max(0, seq - last - 1 - self._queue_drops)
+        self._queue_drops = 0
         self.last_seq = seq
         self.stats.count += 1
         return msg
@@ -281,8 +444,20 @@ class Subscription:
 
     def close(self) -> None:
         self._closed = True
-        if isinstance(self.task, asyncio.Task):
-            self.task.cancel()
+        if self._rest is not None:
+            self._rest.cancel()
+            coro, self._suspended = self._suspended, None
+            if coro is not None:   # its task never ran (cancelled before its first step): cancel the call
+                _cancel(coro)
         elif self._wake is not None:
             self._wake.put(None)
 
+
+def _cancel(coro: Any) -> None:
+    """Throw ``CancelledError`` into a suspended handler coroutine (its cleanup runs); closed if it awaits
+    again."""
+    try:
+        coro.throw(asyncio.CancelledError())
+    except BaseException:  # noqa: BLE001 - the cancellation itself, its return or its own error: it is over
+        return
+    coro.close()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import zmq
 
@@ -61,6 +61,8 @@ class ZmqTransport(Transport):
         self.links: SubLinks | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frames: FramesHandler | None = None
+        #: called on the loop after each drain of the SUB sockets (the node dispatches what it queued)
+        self.on_drained: Callable[[], None] | None = None
         self._poll_task: asyncio.Task | None = None
 
     @property
@@ -133,8 +135,13 @@ class ZmqTransport(Transport):
         return self.links.report() if self.links is not None else ""
 
     def _drain_sub(self) -> None:
-        if self.links is not None:
-            self.links.drain(self._on_frames)
+        links = self.links
+        if links is not None:
+            try:
+                links.drain(self._on_frames)
+            finally:
+                if self.on_drained is not None:
+                    self.on_drained()
 
     async def _safety_poll(self) -> None:
         while True:
