@@ -86,8 +86,9 @@ def twin_settings(lf=None) -> dict:
 def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
     """The scene a launch ran and its summary entry ``{"name", "file", "kind", "description", "source"}``: the
     launch file's top-level ``scene`` (substituted; ``--set scene=FILE`` lands there), else the world node's
-    ``scene`` param, else the paper's cylinder (``source`` says which). An unreadable file is reported in
-    ``source`` and the paper's cylinder used (the report never fails on it)."""
+    ``scene`` param; without a launch file (a report again) the scene file ``out/summary.json`` names; else
+    the paper's cylinder (``source`` says which). An unreadable file is reported in ``source`` and the paper's
+    cylinder used (the report never fails on it)."""
     path, source = None, "the paper's cylinder (the launch file names no scene)"
     scene = lf.section("scene") if lf is not None and hasattr(lf, "section") else None
     if scene:
@@ -97,6 +98,8 @@ def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
             if getattr(spec, "type", None) == "world" and (spec.params or {}).get("scene"):
                 path, source = str(spec.params["scene"]), "world node params"
                 break
+    elif out is not None:
+        path, source = _reported_scene(Path(out))
     sc = paper_scene()
     if path:
         try:
@@ -106,6 +109,18 @@ def scene_settings(lf=None, out: str | None = None) -> tuple[Scene, dict]:
             path = None
     return sc, {"name": sc.name, "file": str(Path(path).resolve()) if path else None, "kind": sc.object.kind,
                 "description": sc.description, "source": source}
+
+
+def _reported_scene(out_dir: Path) -> tuple[str | None, str]:
+    """(scene file, source) from an earlier report's ``summary.json`` in ``out_dir``; (None, the cylinder's
+    source) without one, or when it names no file."""
+    try:
+        entry = json.loads((out_dir / "summary.json").read_text()).get("scene") or {}
+    except (OSError, ValueError):
+        entry = {}
+    if entry.get("file"):
+        return str(entry["file"]), "the scene of the run's earlier summary.json"
+    return None, "the paper's cylinder (no launch file, and no earlier summary.json names a scene)"
 
 
 def _clock(summary: dict, out_dir: Path) -> None:

@@ -297,7 +297,8 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
     """Table I two ways per stroking segment: ``felt`` (the true fingertip, interpolated at each exposure,
     against the true sheet: the row of :func:`flexsheet.analysis.table1.errors_row` plus ``angle3d_mean_deg``,
     the full 3-D angle between the object's normal and the sheet's) and ``paper`` (the measured fingertip
-    against the sheet the display believes). Plus ``decomposition`` (:func:`_decomposition`), ``targets`` (Δθ
+    against the sheet the display believes). Plus ``decomposition`` (:func:`_decomposition`), ``by_status``
+    (:func:`felt_by_status`), ``targets`` (Δθ
     mean, deg: the paper's ÷ :data:`~flexsheet.analysis.table1.FELT_TARGET_FACTOR` felt, ÷
     :data:`~flexsheet.analysis.table1.TARGET_FACTOR` paper), ``target_source`` and ``verdicts``
     (:func:`flexsheet.analysis.report_verdicts.table1_verdicts`: on the paper's cylinder only, none for a
@@ -328,11 +329,45 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
             if paper is not None:
                 series[key]["paper_deg"] = np.degrees(paper.dtheta).tolist()
         out.setdefault("decomposition", {})[key] = _decomposition(d, ms, shape, n_true, normal, believed)
+        out.setdefault("by_status", {})[key] = felt_by_status(d, t, np.degrees(felt.dtheta))
     out["targets"] = {kind: {k: target(k, f)["dtheta_mean_deg"] for k in PAPER_TABLE1}
                       for kind, f in (("felt", FELT_TARGET_FACTOR), ("paper", TARGET_FACTOR))}
     out["target_source"] = {kind: f"paper Table I ÷ {f:g}"
                             for kind, f in (("felt", FELT_TARGET_FACTOR), ("paper", TARGET_FACTOR))}
     out["verdicts"] = table1_verdicts(out, segments or {}, paper_scene_)
+    return out
+
+
+#: the plan's status classes of :func:`felt_by_status`, first match wins: the sheet held where the arms
+#: cannot reach, held off the head, turned only part of the way, held for another reason, rate-limited,
+#: else ok
+STATUS_CLASSES = (("unreachable", "unreachable"), ("keep_out", "keep_out"), ("reach:nearest", "nearest"),
+                  ("hold:", "hold"), ("rate_limited", "rate_limited"))
+
+
+def status_class(status: str) -> str:
+    """The class (:data:`STATUS_CLASSES`, else ``"ok"``) of a plan's ``status`` ("ok", "rate_limited;
+    ik:left:limit:J3;unreachable", ...)."""
+    for key, name in STATUS_CLASSES:
+        if key in status:
+            return name
+    return "ok"
+
+
+def felt_by_status(d: dict[str, list], t: np.ndarray, dtheta_deg: np.ndarray) -> dict:
+    """The felt error split by what the planner said of the plan made from each fingertip (its
+    ``/sheet/target`` with that ``source_stamp``; class :func:`status_class`, ``"no plan"`` without one): per
+    class ``share`` of the samples, ``mean_deg`` of their Δθ and ``of_mean`` (their share of the mean: the
+    classes' ``of_mean`` add up to 1, so the mean splits additively). ``t`` (N,): the fingertips' exposure
+    stamps, s; ``dtheta_deg`` (N,): each sample's felt Δθ, deg."""
+    by_src = {m.source_stamp: m.status for _, m in d.get("/sheet/target", [])}
+    cls = np.array([status_class(by_src[x]) if x in by_src else "no plan" for x in t.tolist()])
+    total = float(dtheta_deg.sum())
+    out = {}
+    for c in sorted(set(cls.tolist())):
+        m = cls == c
+        out[c] = {"share": float(m.mean()), "mean_deg": float(dtheta_deg[m].mean()),
+                  "of_mean": float(dtheta_deg[m].sum() / total) if total > 0.0 else 0.0}
     return out
 
 

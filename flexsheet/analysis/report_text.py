@@ -138,6 +138,11 @@ def _decomposition(s: dict) -> tuple[list[str], list[str]]:
              _num(felt.get(k, {}).get("gap_mean_mm"))] for k in row_order(dc)]
     head = ["segment", "tremor", "camera", "prediction", "kinematics", "slow finger", "felt 3-D deg",
             "felt gap mm"]
+    for k in row_order(t1.get("by_status", {})):
+        parts = sorted(t1["by_status"][k].items(), key=lambda kv: -kv[1]["of_mean"])
+        prose.append(f"By the planner's status ({_label(k)}): " + "; ".join(
+            f"{c} {100 * v['share']:.0f} % of samples, {100 * v['of_mean']:.0f} % of the felt mean "
+            f"({v['mean_deg']:.2f}° there)" for c, v in parts) + ".")
     return prose, _table(head, rows) if rows else []
 
 

@@ -5,7 +5,9 @@ For each draw the scene is written to ``OUT/draw<k>/`` and the whole graph of ``
 on the simulated clock, on TCP ports of its own (the world's default script: a 10 s stroke, a 30 s stroke, a
 10 s stroke and push), then the run's report is read. Per object (the run's ``summary.json`` and bag):
 
-* ``felt_dtheta_deg`` 10 / 30 s: Table I felt (true finger against true sheet, paper Fig. 9);
+* ``felt_dtheta_deg`` 10 / 30 s: Table I felt (true finger against true sheet, paper Fig. 9), and
+  ``felt_30_by_status``: the 30 s row split by the planner's status at each sample (the report's
+  ``table1.by_status``: which share of the mean came while the arms could not reach the pose, ...);
 * ``residual_lag_ms``: the sheet's lag beyond the prediction's lead (``delay``);
 * ``landings``: touches, arrivals, the share the sheet met first (``placement``);
 * ``force_within_15pct`` of presses ≥ 2 mm in, ``saturated`` share, ``follow_ms`` (``compliance``);
@@ -76,6 +78,7 @@ def measure_object(summary: dict, bag: Path | None, log_text: str = "") -> dict:
     holds = bridge_holds(bag) if bag is not None and bag.exists() else {}
     return {
         "felt_dtheta_deg": {row: _get(felt, row, "dtheta_mean_deg") for row in ("10", "30")},
+        "felt_30_by_status": _get(summary, "table1", "by_status", "30"),
         "residual_lag_ms": _get(summary, "delay", "residual_lag_ms"),
         "landings": {**{k: _get(summary, "placement", k)
                         for k in ("touches", "arrivals", "sheet_first", "late", "never")},

@@ -324,3 +324,15 @@ def test_the_module_command_teaches_with_help_and_says_when_a_folder_has_no_bag(
     assert "example: python -m flexsheet.analysis.report out/sim" in capsys.readouterr().out
     assert cli([str(tmp_path)]) == 1
     assert f"[report] no bag in {tmp_path}" in capsys.readouterr().out
+
+
+def test_a_report_again_without_the_launch_file_keeps_the_scene_the_run_reported(tmp_path):
+    from flexsheet.analysis.report import scene_settings
+
+    scene_file = Path(__file__).resolve().parents[3] / "launch" / "scenes" / "sphere.yaml"
+    (tmp_path / "summary.json").write_text(json.dumps({"scene": {"name": "sphere", "file": str(scene_file)}}))
+    sc, entry = scene_settings(None, str(tmp_path))
+    assert sc.name == "sphere" and entry["file"] == str(scene_file.resolve())
+    assert "earlier summary.json" in entry["source"]
+    sc, entry = scene_settings(None, str(tmp_path / "nothing"))          # no summary there: the cylinder
+    assert entry["file"] is None and "no earlier summary.json" in entry["source"]

@@ -117,3 +117,26 @@ def test_segments_count_a_paused_stroke_once_and_a_cut_one_as_partial():
     assert not seg["10"]["partial"] and seg["10"]["expected_n"] == 480
     assert seg["30"]["partial"] and seg["30"]["coverage"] == pytest.approx(10.0 / 30.0, abs=0.01)
     assert run["partial"] and "segment 30 s" in run["note"] and "33 %" in run["note"]
+
+
+def test_the_felt_error_splits_additively_by_the_planners_status_and_names_the_largest():
+    from types import SimpleNamespace
+
+    from flexsheet.analysis.report_analysis import felt_by_status, status_class
+
+    assert status_class("rate_limited;ik:left:limit:J3;unreachable") == "unreachable"
+    assert status_class("rate_limited;reach:nearest") == "nearest"
+    assert status_class("hold:head_lost") == "hold" and status_class("ok") == "ok"
+    t = np.arange(10) * 0.02
+    status = ["ok"] * 6 + ["rate_limited;ik:left:limit:J3;unreachable"] * 3      # the last fingertip: no plan
+    plans = [(0.0, SimpleNamespace(source_stamp=float(x), status=s))
+             for x, s in zip(t[:9], status, strict=True)]
+    dtheta = np.array([0.2] * 6 + [8.0] * 3 + [1.0])
+    split = felt_by_status({"/sheet/target": plans}, t, dtheta)
+    assert split["unreachable"]["share"] == pytest.approx(0.3)
+    assert split["unreachable"]["mean_deg"] == pytest.approx(8.0)
+    assert split["unreachable"]["of_mean"] == pytest.approx(24.0 / 26.2)
+    assert split["no plan"]["share"] == pytest.approx(0.1)
+    assert sum(v["of_mean"] for v in split.values()) == pytest.approx(1.0)
+    # the shares times the means give the felt mean back
+    assert sum(v["share"] * v["mean_deg"] for v in split.values()) == pytest.approx(dtheta.mean())
