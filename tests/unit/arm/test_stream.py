@@ -131,8 +131,10 @@ def test_a_new_goal_leaves_before_the_next_cycles_read_even_when_that_cycle_is_d
     stream.link = link
 
     async def scenario():
-        task = asyncio.get_running_loop().create_task(stream.run(n_cycles=3))
-        while link.calls.count("send") < 1:                  # the first cycle ran: a snapshot exists
+        task = asyncio.get_running_loop().create_task(stream.run(n_cycles=5))
+        # the first cycle ran (a snapshot exists) and no read is in flight: a loaded machine can wake this
+        # poll after the next cycle's read began, whose send would then rightly go first
+        while link.calls.count("send") < 1 or link.calls[-1] != "send":
             await asyncio.sleep(0.0005)
         time.sleep(2 * period)                     # the loop is busy elsewhere: the next cycle is due
         t.set_target(T, time.time(), time.time())
