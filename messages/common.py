@@ -40,23 +40,41 @@ class Header(BaseModel):
     seq: int = Field(default=0, ge=0, description="per-publisher sequence number")
 
 
+#: arrays up to this many elements are checked for finiteness as a Python float sum (faster than numpy's
+#: ufuncs on a few elements)
+_SMALL_ARRAY = 64
+
+
+def _all_finite(value: np.ndarray) -> bool:
+    """True if every element of a float array is finite. Its sum is finite only if every element is (a NaN or
+    an inf propagates); a sum that overflows is settled element by element."""
+    if value.size <= _SMALL_ARRAY:
+        total = sum(value.ravel().tolist())
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflow or inf - inf: settled below
+            total = np.add.reduce(value, axis=None)
+    return math.isfinite(total) or bool(np.isfinite(value).all())
+
+
 def _array_validator(dtype: str | None, shape: tuple[int | None, ...] | None):
     want_dtype = np.dtype(dtype) if dtype is not None else None
     ndim = len(shape) if shape is not None else None
     fixed = [(i, n) for i, n in enumerate(shape or ()) if n is not None]
+    exact = tuple(shape) if shape is not None and len(fixed) == ndim else None   # every dimension fixed
     must_be_finite = want_dtype is None or want_dtype.kind == "f"
-    isfinite, ndarray_t = np.isfinite, np.ndarray
+    ndarray_t = np.ndarray
 
     def validate(value: Any) -> np.ndarray:
         if type(value) is not ndarray_t and not isinstance(value, ndarray_t):
             raise ValueError(f"expected a numpy.ndarray, got {type(value).__name__}")
-        if want_dtype is not None and value.dtype != want_dtype:
-            raise ValueError(f"expected dtype {want_dtype}, got {value.dtype}")
+        vdtype = value.dtype
+        if want_dtype is not None and vdtype is not want_dtype and vdtype != want_dtype:
+            raise ValueError(f"expected dtype {want_dtype}, got {vdtype}")
         if ndim is not None:
             vs = value.shape
-            if len(vs) != ndim or any(vs[i] != n for i, n in fixed):
+            if (vs != exact) if exact is not None else (len(vs) != ndim or any(vs[i] != n for i, n in fixed)):
                 raise ValueError(f"expected shape {_fmt(shape)}, got {vs}")
-        if must_be_finite and value.dtype.kind == "f" and not isfinite(value).all():
+        if must_be_finite and vdtype.kind == "f" and not _all_finite(value):
             raise ValueError(f"must be finite, got {value!r:.200}")
         return value
 

@@ -19,6 +19,7 @@ from typing import Any
 import msgpack
 import numpy as np
 from pydantic import BaseModel, ValidationError
+from pydantic_core import SchemaValidator
 
 from messages import MESSAGE_TYPES, Message, Topic
 
@@ -74,6 +75,10 @@ def _count_text(n: int) -> str:
     return t if len(t) <= 20 else f"~10^{len(t) - 1}"
 
 
+#: good descriptors seen (bytes -> (index, dtype, shape, nbytes)): a topic's repeat message after message
+_GOOD_DESCRIPTORS: dict[bytes, tuple[int, np.dtype, tuple[int, ...], int]] = {}
+
+
 def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int, ...], int]:
     if type(data) is not bytes:
         data = bytes(data)
@@ -81,6 +86,8 @@ def _descriptor(data: bytes, topic_name: str) -> tuple[int, np.dtype, tuple[int,
     parsed = parse_descriptor(data) if len(data) <= 96 else parse_descriptor.__wrapped__(data)
     if isinstance(parsed, str):
         raise DecodeError(_line(f"{topic_name}: {parsed}"))
+    if len(data) <= 96 and len(_GOOD_DESCRIPTORS) < 4096:
+        _GOOD_DESCRIPTORS[data] = parsed
     return parsed
 
 #: refuse arrays larger than this (bytes) on decode: a hostile size must not allocate or wrap garbage
@@ -110,6 +117,8 @@ def _topic_name(frame: Any) -> str:
 
 _EXT_CACHE: dict[tuple, msgpack.ExtType] = {}
 _ExtType, _ndarray, _BaseModel = msgpack.ExtType, np.ndarray, BaseModel
+_unpackb = msgpack.unpackb
+_good_descriptor = _GOOD_DESCRIPTORS.get
 
 
 def _ext(index: int, arr: np.ndarray) -> msgpack.ExtType:
@@ -180,25 +189,27 @@ def _unpack(frames: list, topic_name: str) -> dict:
     def ext_hook(code: int, data: bytes) -> Any:
         if code != EXT_NDARRAY:
             raise DecodeError(f"{topic_name}: unknown msgpack ext code {code}")
-        idx, dtype, shape, nbytes = _descriptor(data, topic_name)
+        desc = _good_descriptor(data)
+        idx, dtype, shape, nbytes = desc if desc is not None else _descriptor(data, topic_name)
         if idx >= nbuf:
             raise DecodeError(f"{topic_name}: array buffer index {idx!r} out of range (frames: {nbuf})")
         buf = frames[idx]
         if type(buf) is bytes:
             have = len(buf)
         else:
-            buf = buf.buffer if hasattr(buf, "buffer") else buf
-            have = memoryview(buf).nbytes
+            if hasattr(buf, "buffer"):      # a zmq.Frame: its memory
+                buf = buf.buffer
+            have = buf.nbytes if type(buf) is memoryview else memoryview(buf).nbytes
         if have != nbytes:
             raise DecodeError(f"{topic_name}: array shape {_shape_text(shape)} dtype {dtype} needs {nbytes} "
                               f"bytes, buffer has {have}")
-        return np.frombuffer(buf, dtype=dtype).reshape(shape)
+        return _ndarray(shape, dtype, buf)   # a view of the frame's memory (read-only for bytes), no copy
 
     meta = frames[1]
     if type(meta) is not bytes and hasattr(meta, "bytes"):
         meta = meta.bytes
     try:
-        obj = msgpack.unpackb(meta, ext_hook=ext_hook, raw=False, strict_map_key=True)
+        obj = _unpackb(meta, ext_hook=ext_hook, raw=False, strict_map_key=True)
     except DecodeError:
         raise
     except Exception as exc:  # noqa: BLE001 - msgpack raises many types on garbage
@@ -225,12 +236,25 @@ def decode(frames: list, topic: Topic) -> Message:
         raise DecodeError(_line(f"{topic.name}: {cls.SCHEMA} version mismatch: expected v{cls.VERSION}, "
                                 f"got v{obj['v']!r:.40}"))
     try:
-        return cls.model_validate(obj["d"])
+        return _validator(cls)(obj["d"])
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
         raise DecodeError(_line(f"{topic.name}: field {loc or '<message>'}: {err['msg']:.200} "
                                 f"(value {err.get('input')!r:.80})")) from None
+
+
+_VALIDATORS: dict[type, Any] = {}
+
+
+def _validator(cls: type[Message]) -> Any:
+    """``cls.model_validate`` as pydantic-core's prebuilt ``validate_python`` of the class (cached per class;
+    the same validation, less the per-call Python wrapper)."""
+    fn = _VALIDATORS.get(cls)
+    if fn is None:
+        v = cls.__pydantic_validator__
+        fn = _VALIDATORS[cls] = v.validate_python if isinstance(v, SchemaValidator) else cls.model_validate
+    return fn
 
 
 def decode_any(frames: list) -> Message:
