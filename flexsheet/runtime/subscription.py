@@ -156,7 +156,7 @@ class _Rest:
 
 class Subscription:
     """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS,
-    handler, consumer (task or worker thread) and statistics.
+    handler, consumer (:class:`Direct` dispatch on the loop, or a worker thread) and statistics.
 
     Queue items are wire frames (decoded and validated by the consumer: the wire boundary) or, from a node of
     the same container, the message object itself (already validated when it was built).

@@ -27,6 +27,7 @@ import tracemalloc
 import msgpack
 import numpy as np
 import pytest
+import zmq
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
@@ -447,3 +448,27 @@ def test_a_descriptor_with_many_huge_dims_gives_one_bounded_line():
     why = parse_descriptor(data)
     assert isinstance(why, str) and "\n" not in why and len(why) <= 200, why
     assert "... 37 dims" in why and "needs" in why
+
+
+def test_frames_received_as_zmq_frames_decode_to_the_same_message():
+    msg = tip()
+    frames = encode(T.FINGERTIP.name, msg)
+    zframes = [bytes(frames[0]), bytes(frames[1])] + [zmq.Frame(bytes(memoryview(f))) for f in frames[2:]]
+    out = decode(zframes, T.FINGERTIP)
+    assert out.header == msg.header and out.exposure_stamp == msg.exposure_stamp
+    for name in ("position", "covariance", "predicted_position"):
+        np.testing.assert_array_equal(getattr(out, name), getattr(msg, name))
+    short = zframes[:3] + [zmq.Frame(b"\0" * 8), zframes[4]]
+    with pytest.raises(DecodeError, match="needs 72 bytes, buffer has 8"):
+        decode(short, T.FINGERTIP)
+
+
+def test_decode_rejects_what_model_validate_rejects_with_the_field():
+    frames = encode(T.FINGERTIP.name, tip())
+    env = msgpack.unpackb(frames[1], ext_hook=lambda c, d: msgpack.ExtType(c, d))
+    for field, value, needle in (("prediction_horizon", -1.0, "field prediction_horizon"),
+                                 ("valid", 1, "field valid"), ("exposure_stamp", "x", "field exposure_stamp"),
+                                 ("extra", 1.0, "field extra")):
+        bad = dict(env, d=dict(env["d"], **{field: value}))
+        with pytest.raises(DecodeError, match=needle):
+            decode([frames[0], msgpack.packb(bad), *frames[2:]], T.FINGERTIP)

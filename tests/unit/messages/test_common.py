@@ -1,13 +1,11 @@
-"""The codec's fast paths keep validation at the wire boundary: the finiteness check of float arrays (a sum
-that overflows is settled element by element; a NaN or inf anywhere, small or large array, is rejected naming
-the field), decoding from ``zmq.Frame`` buffers, and the same errors as ``model_validate``."""
+"""The array fields' validation (messages.common.ndarray): the finiteness check of float arrays (a sum that
+overflows is settled element by element; a NaN or inf anywhere, small or large array, is rejected naming the
+field), and shape and dtype errors naming expected and got."""
 
 from __future__ import annotations
 
-import msgpack
 import numpy as np
 import pytest
-import zmq
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from flexsheet.runtime.codec import DecodeError, decode, encode
@@ -74,27 +72,3 @@ def test_shape_and_dtype_errors_name_expected_and_got():
         tip(position=np.zeros(3, dtype=np.float32))
     with pytest.raises(ValidationError, match="expected a numpy.ndarray, got list"):
         tip(position=[0.0, 0.0, 0.0])
-
-
-def test_frames_received_as_zmq_frames_decode_to_the_same_message():
-    msg = tip()
-    frames = encode(T.FINGERTIP.name, msg)
-    zframes = [bytes(frames[0]), bytes(frames[1])] + [zmq.Frame(bytes(memoryview(f))) for f in frames[2:]]
-    out = decode(zframes, T.FINGERTIP)
-    assert out.header == msg.header and out.exposure_stamp == msg.exposure_stamp
-    for name in ("position", "covariance", "predicted_position"):
-        np.testing.assert_array_equal(getattr(out, name), getattr(msg, name))
-    short = zframes[:3] + [zmq.Frame(b"\0" * 8), zframes[4]]
-    with pytest.raises(DecodeError, match="needs 72 bytes, buffer has 8"):
-        decode(short, T.FINGERTIP)
-
-
-def test_decode_rejects_what_model_validate_rejects_with_the_field():
-    frames = encode(T.FINGERTIP.name, tip())
-    env = msgpack.unpackb(frames[1], ext_hook=lambda c, d: msgpack.ExtType(c, d))
-    for field, value, needle in (("prediction_horizon", -1.0, "field prediction_horizon"),
-                                 ("valid", 1, "field valid"), ("exposure_stamp", "x", "field exposure_stamp"),
-                                 ("extra", 1.0, "field extra")):
-        bad = dict(env, d=dict(env["d"], **{field: value}))
-        with pytest.raises(DecodeError, match=needle):
-            decode([frames[0], msgpack.packb(bad), *frames[2:]], T.FINGERTIP)
