@@ -38,8 +38,7 @@ class PlannerConfig:
     (:class:`flexsheet.planning.pose_choice.PoseChoice`, with the arms' IK): candidates every ``psi_step`` rad
     within ±``psi_range`` rad of the paper's rule (0: the paper's rule alone), their look-ahead rolls up to
     ``psi_lookahead`` rad, a new choice only when better by ``psi_hysteresis`` (score units: a share of a
-    joint's range), chosen at most every ``psi_period`` s and only while the finger is farther than
-    ``psi_freeze_distance`` m from the surface (nearer, ψ is kept). Raises ``ValueError`` on bad values."""
+    joint's range), chosen every ``psi_period`` s. Raises ``ValueError`` on bad values."""
 
     touch_distance: float = 0.002
     release_distance: float = 0.006
@@ -61,7 +60,6 @@ class PlannerConfig:
     psi_lookahead: float = 0.6
     psi_hysteresis: float = 0.05
     psi_period: float = 0.1
-    psi_freeze_distance: float = 0.025
     material: SheetMaterial = field(default_factory=SheetMaterial)
     limits: MotionLimits = field(default_factory=MotionLimits)
     reach: ReachModel = field(default_factory=ReachModel)
@@ -89,7 +87,7 @@ class PlannerConfig:
             raise ValueError(f"pose_velocity_cutoff must be in (0, 50] Hz, got {self.pose_velocity_cutoff!r}")
         if not (math.isfinite(self.psi_range) and 0.0 <= self.psi_range <= math.pi / 2 + 1e-9):
             raise ValueError(f"psi_range must be in [0, pi/2] rad, got {self.psi_range!r}")
-        for k in ("psi_step", "psi_lookahead", "psi_period", "psi_freeze_distance"):
+        for k in ("psi_step", "psi_lookahead", "psi_period"):
             object.__setattr__(self, k, check_positive(k, getattr(self, k)))
         if not (math.isfinite(self.psi_hysteresis) and self.psi_hysteresis >= 0.0):
             raise ValueError(f"psi_hysteresis must be finite and >= 0, got {self.psi_hysteresis!r}")

@@ -4,8 +4,7 @@ The paper's rule sets the clamp axis ``axis_u`` to ``u_ref`` (+y) projected onto
 :class:`PoseChoice` turns it by ψ about the normal ``n``: ``axis_u = cos ψ·u₀ + sin ψ·(n × u₀)``. While the
 finger touches, the sheet rolls without slip and ``axis_u`` is parallel-transported: ψ is not chosen there.
 
-Between touches and while the finger is farther than ``psi_freeze_distance`` from the surface, a sweep
-(:data:`PER_PLAN` candidates a plan) scores each candidate
+Between touches, a sweep every ``psi_period`` s (:data:`PER_PLAN` candidates a plan) scores each candidate
 ψ_k = k·``psi_step``, |ψ_k| ≤ ``psi_range``, by both arms' IK (each arm's
 :class:`~flexsheet.arm.kinematics.ArmKinematics` of :class:`~flexsheet.planning.arm_reach.ArmReach`, from
 its current solution, which stays) at
@@ -21,15 +20,9 @@ share of its range, 0…0.5) + :data:`W_MANIP`·min(1, w/:data:`W_REF`) (Yoshika
 poses) − :data:`W_TRAVEL`·(the pose's largest joint move from the arms' current solution / its speed limit,
 s) + :data:`W_CLEAR`·min(1, clearance/``near_distance``) (head keep-out, sheet and arms, when tracked; −1
 inside). A pose an arm does not solve within :data:`IK_ITER` iterations ends the scoring: −2 per pose,
-less the poses that did solve. Choice: the current ψ while it is within ``psi_hysteresis`` of the best;
-else the paper's ψ = 0 when it is; else the best. The rate limiter turns the sheet to it.
-
-A sweep starts at most every ``psi_period`` s and only when the contact has moved :data:`RESWEEP` m or a
-joint of the planner's arm solution :data:`RESWEEP_JOINT` rad since the last one (a still hover is scored
-until the arms are at rest). Nearer than ``psi_freeze_distance`` (the approach, a lift
-between strokes) ψ is kept: a turn moves both clamps by centimetres, and a sheet still turning when the
-finger lands stands off the surface and tilted (a cylinder's landing 7.6 mm ahead, 39° off, with the turn
-made 0.5 s before). Units m, rad, s; display frame.
+less the poses that did solve. Choice: the current ψ while it is within
+``psi_hysteresis`` of the best; else the paper's ψ = 0 when it is; else the best. The rate limiter turns the
+sheet to it. Units m, rad, s; display frame.
 """
 
 from __future__ import annotations
@@ -42,8 +35,7 @@ from flexsheet.arm.kinematics import QD_MAX
 from flexsheet.model.sheet import clamp_poses
 from flexsheet.model.vec import Vec, cross, dot, norm, perp_unit, rodrigues
 
-__all__ = ["PoseChoice", "LOOK_LENGTH", "LOOK_STEP", "W_MANIP", "W_REF", "W_TRAVEL", "W_CLEAR", "RESWEEP",
-           "RESWEEP_JOINT"]
+__all__ = ["PoseChoice", "LOOK_LENGTH", "LOOK_STEP", "W_MANIP", "W_REF", "W_TRAVEL", "W_CLEAR"]
 
 #: m: the stroke whose turn of the sheet the look-ahead poses cover
 LOOK_LENGTH = 0.06
@@ -59,9 +51,6 @@ W_CLEAR = 0.1
 PER_PLAN = 3
 #: IK iterations a scored pose may take (from the arms' current solution; more: counted as not solving)
 IK_ITER = 12
-#: m, rad: how far the contact or a joint of the planner's arm solution moves before a new sweep (a still
-#: hover with the arms at rest is scored once)
-RESWEEP, RESWEEP_JOINT = 0.005, 0.01
 
 
 class PoseChoice:
@@ -82,8 +71,6 @@ class PoseChoice:
         """Back to the paper's rule (ψ = 0), nothing evaluated."""
         self.psi = 0.0
         self.t_eval: float | None = None
-        self.q_eval: Vec | None = None
-        self._seed_eval: dict[str, np.ndarray] = {}
         self.scores: dict[float, float] = {}
         self._pending: list[float] = []
         self._sweep: dict[float, float] = {}
@@ -92,8 +79,7 @@ class PoseChoice:
              choose: bool) -> Vec | None:
         """``axis_u`` (3,) for contact ``q`` (3,) m, unit normal ``n`` (3,), the contact's ``offset`` (s_u,
         s_v) m on the sheet and clamp ``stretch``, at time ``t`` s: u₀ turned by ψ about ``n``; with
-        ``choose`` (between touches, the finger beyond ``psi_freeze_distance``) the sweep goes on (module
-        doc); without it ψ is kept. None where
+        ``choose`` (between touches) the sweep goes on (module doc). None where
         ``u_ref`` is along ``n`` (no u₀: the caller keeps its axis)."""
         ref = self.cfg.u_ref
         if abs(dot(ref, n)) >= 0.999 * norm(ref):
@@ -101,10 +87,9 @@ class PoseChoice:
         u0 = perp_unit(n, ref)
         if not choose:
             self._pending = []                          # touching: a sweep under way is dropped
-        elif not self._pending and self._due(t, q):
+        elif not self._pending and (self.t_eval is None or not 0.0 <= t - self.t_eval < self.cfg.psi_period):
             self._pending = sorted(self.candidates, key=lambda p: (p != self.psi, p != 0.0, abs(p)))
-            self._sweep, self.q_eval = {}, q
-            self._seed_eval = {k: np.array(v, float) for k, v in self.arm_reach.seed.items()}
+            self._sweep = {}
         if self._pending:
             looks = self._looks(q, n, u0)
             for psi in self._pending[:PER_PLAN]:
@@ -114,16 +99,6 @@ class PoseChoice:
                 self.t_eval = t
                 self.decide(self._sweep)
         return turn(n, u0, self.psi)
-
-    def _due(self, t: float, q: Vec) -> bool:
-        """Whether a new sweep starts at time ``t`` s for contact ``q`` (module doc)."""
-        if self.t_eval is None or self.q_eval is None:
-            return True
-        if 0.0 <= t - self.t_eval < self.cfg.psi_period:
-            return False
-        return math.dist(q, self.q_eval) >= RESWEEP or any(
-            float(np.max(np.abs(np.asarray(v) - self._seed_eval[k]))) >= RESWEEP_JOINT
-            for k, v in self.arm_reach.seed.items() if k in self._seed_eval)
 
     def decide(self, scores: dict[float, float]) -> float:
         """Pick ψ from ``scores`` {ψ: score} with the hysteresis (module doc); returns ψ rad."""

@@ -248,8 +248,7 @@ class SurfacePlanner:
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         if self.pose_choice is not None and not (self.touching and was_touching):   # ψ: not while rolling
             st0 = self.last.stretch if self.last is not None else cfg.material.min_stretch
-            choose = not self.touching and dist > cfg.psi_freeze_distance           # ψ kept near the surface
-            u = self.pose_choice.axis(s.t, q, n, (su, sv), st0, choose) or u
+            u = self.pose_choice.axis(s.t, q, n, (su, sv), st0, not self.touching) or u
         v = cross(n, u)
         tr = self._stretch(k_obj, table_force, su, sv, depth, object_press)
         if tr.saturated:
