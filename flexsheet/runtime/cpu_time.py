@@ -26,18 +26,25 @@ class CpuCounter:
         self.s = 0.0
 
 
+#: :func:`timed`'s ``first`` when the coroutine has not been stepped yet
+_NOT_STARTED: Any = object()
+
+
 class _Timed:
-    """Awaitable that steps ``coro`` (send / throw) and adds each step's thread CPU time to ``counter``."""
+    """Awaitable that steps ``coro`` (send / throw) and adds each step's thread CPU time to ``counter``; with
+    ``first``, ``coro`` already ran its first step, which yielded ``first``."""
 
-    __slots__ = ("coro", "counter")
+    __slots__ = ("coro", "counter", "first")
 
-    def __init__(self, coro: Coroutine, counter: CpuCounter) -> None:
-        self.coro, self.counter = coro, counter
+    def __init__(self, coro: Coroutine, counter: CpuCounter, first: Any = _NOT_STARTED) -> None:
+        self.coro, self.counter, self.first = coro, counter, first
 
     def __await__(self):
         coro, counter = self.coro, self.counter
         value: Any = None
         error: BaseException | None = None
+        if self.first is not _NOT_STARTED:
+            value, error = yield from _pass(self.first)
         while True:
             t0 = _thread_time()
             try:
@@ -49,13 +56,20 @@ class _Timed:
                 counter.s += _thread_time() - t0
                 raise
             counter.s += _thread_time() - t0
-            try:
-                value, error = (yield yielded), None
-            except BaseException as exc:      # cancellation or a throw into the awaiting task: pass it on
-                value, error = None, exc
+            value, error = yield from _pass(yielded)
 
 
-def timed(coro: Coroutine, counter: CpuCounter) -> _Timed:
+def _pass(yielded: Any):
+    """Yield ``yielded`` to the task driving us; (the value sent back, None) or (None, what was thrown in:
+    a cancellation, passed on to the coroutine)."""
+    try:
+        return (yield yielded), None
+    except BaseException as exc:
+        return None, exc
+
+
+def timed(coro: Coroutine, counter: CpuCounter, first: Any = _NOT_STARTED) -> _Timed:
     """``await timed(coro, counter)`` is ``await coro``, and adds the CPU time of ``coro``'s own steps to
-    ``counter.s`` (s): not what other tasks ran while it waited. Raises what ``coro`` raises."""
-    return _Timed(coro, counter)
+    ``counter.s`` (s): not what other tasks ran while it waited. ``first``: ``coro`` already ran its first
+    step (timed by the caller), which yielded ``first``. Raises what ``coro`` raises."""
+    return _Timed(coro, counter, first)

@@ -125,35 +125,6 @@ class Dispatcher:
             sub.dispatch()
 
 
-class _Rest:
-    """Awaitable: the rest of a handler coroutine whose first step yielded ``first`` (a future it waits on),
-    stepped on as :func:`flexsheet.runtime.cpu_time.timed` does: each step's thread CPU time, s, is added to
-    ``counter``."""
-
-    __slots__ = ("coro", "first", "counter")
-
-    def __init__(self, coro: Any, first: Any, counter: CpuCounter) -> None:
-        self.coro, self.first, self.counter = coro, first, counter
-
-    def __await__(self):
-        coro, counter, yielded = self.coro, self.counter, self.first
-        while True:
-            try:
-                value, error = (yield yielded), None
-            except BaseException as exc:      # cancellation or a throw into the awaiting task: pass it on
-                value, error = None, exc
-            t0 = _thread_time()
-            try:
-                yielded = coro.send(value) if error is None else coro.throw(error)
-            except StopIteration as stop:
-                counter.s += _thread_time() - t0
-                return stop.value
-            except BaseException:
-                counter.s += _thread_time() - t0
-                raise
-            counter.s += _thread_time() - t0
-
-
 class Subscription:
     """One typed subscription of ``node`` (its :class:`~flexsheet.runtime.node.Node`): its queue, QoS,
     handler, consumer (:class:`Direct` dispatch on the loop, or a worker thread) and statistics.
@@ -313,7 +284,7 @@ class Subscription:
         cpu.s = spent
         try:
             try:
-                await _Rest(coro, yielded, cpu)
+                await timed(coro, cpu, yielded)
             except ValueError as exc:
                 self.reject(str(exc))
             except Exception:  # noqa: BLE001
