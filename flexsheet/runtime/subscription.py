@@ -283,14 +283,7 @@ class Subscription:
         cpu = CpuCounter()
         cpu.s = spent
         try:
-            try:
-                await timed(coro, cpu, yielded)
-            except ValueError as exc:
-                self.reject(str(exc))
-            except Exception:  # noqa: BLE001
-                self.node._handler_error(self.topic.name)
-            finally:
-                self.cpu_s += cpu.s
+            await self._timed_call(coro, cpu, yielded)
             q = self.queue
             while q and not self._closed:
                 msg = self._accept(q.popleft())
@@ -403,12 +396,16 @@ class Subscription:
             self.cpu_s += _thread_time() - t0
 
     async def _call_async(self, msg: Message) -> None:
-        cpu = CpuCounter()          # its own steps only, not what the loop ran while it awaited
+        await self._timed_call(self.handler(msg), CpuCounter())   # its own steps only, not the loop's others
+
+    async def _timed_call(self, coro: Any, cpu: CpuCounter, *first: Any) -> None:
+        """Await the handler call ``coro`` (``first``: what its first step, already run, yielded), counting a
+        ``ValueError`` as rejected input and another error as a handler bug, its steps' CPU into ``cpu_s``."""
         try:
-            await timed(self.handler(msg), cpu)
+            await timed(coro, cpu, *first)
         except ValueError as exc:
             self.reject(str(exc))
-        except Exception:  # noqa: BLE001
+        except Exception:  # noqa: BLE001 - a handler bug must not kill the node; logged with traceback
             self.node._handler_error(self.topic.name)
         finally:
             self.cpu_s += cpu.s
