@@ -306,6 +306,7 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
     (deg) of both."""
     truths, sheets = d.get("/world/finger", []), d.get("/world/sheet", [])
     shape = planner_shape(scene)
+    statuses = plan_statuses(d)
     out: dict = {"felt": {}, "paper": {}}
     for key, ms in groups.items():
         ms = [m for m in ms if s_ts[0] <= m.exposure_stamp <= s_ts[-1]]
@@ -329,7 +330,7 @@ def felt_and_paper(d: dict[str, list], groups: dict[str, list], scene: Scene, s_
             if paper is not None:
                 series[key]["paper_deg"] = np.degrees(paper.dtheta).tolist()
         out.setdefault("decomposition", {})[key] = _decomposition(d, ms, shape, n_true, normal, believed)
-        out.setdefault("by_status", {})[key] = felt_by_status(d, t, np.degrees(felt.dtheta))
+        out.setdefault("by_status", {})[key] = felt_by_status(statuses, t, np.degrees(felt.dtheta))
     out["targets"] = {kind: {k: target(k, f)["dtheta_mean_deg"] for k in PAPER_TABLE1}
                       for kind, f in (("felt", FELT_TARGET_FACTOR), ("paper", TARGET_FACTOR))}
     out["target_source"] = {kind: f"paper Table I ÷ {f:g}"
@@ -354,13 +355,17 @@ def status_class(status: str) -> str:
     return "ok"
 
 
-def felt_by_status(d: dict[str, list], t: np.ndarray, dtheta_deg: np.ndarray) -> dict:
-    """The felt error split by what the planner said of the plan made from each fingertip (its
-    ``/sheet/target`` with that ``source_stamp``; class :func:`status_class`, ``"no plan"`` without one): per
-    class ``share`` of the samples, ``mean_deg`` of their Δθ and ``of_mean`` (their share of the mean: the
-    classes' ``of_mean`` add up to 1, so the mean splits additively). ``t`` (N,): the fingertips' exposure
-    stamps, s; ``dtheta_deg`` (N,): each sample's felt Δθ, deg."""
-    by_src = {m.source_stamp: m.status for _, m in d.get("/sheet/target", [])}
+def plan_statuses(d: dict[str, list]) -> dict[float, str]:
+    """{source_stamp: status} of the bag's ``/sheet/target`` messages (``d``: topic → [(t, message)])."""
+    return {m.source_stamp: m.status for _, m in d.get("/sheet/target", [])}
+
+
+def felt_by_status(by_src: dict[float, str], t: np.ndarray, dtheta_deg: np.ndarray) -> dict:
+    """The felt error split by what the planner said of the plan made from each fingertip (``by_src``:
+    :func:`plan_statuses`, the plan with that ``source_stamp``; class :func:`status_class`, ``"no plan"``
+    without one): per class ``share`` of the samples, ``mean_deg`` of their Δθ and ``of_mean`` (their share
+    of the mean: the classes' ``of_mean`` add up to 1, so the mean splits additively). ``t`` (N,): the
+    fingertips' exposure stamps, s; ``dtheta_deg`` (N,): each sample's felt Δθ, deg."""
     cls = np.array([status_class(by_src[x]) if x in by_src else "no plan" for x in t.tolist()])
     total = float(dtheta_deg.sum())
     out = {}

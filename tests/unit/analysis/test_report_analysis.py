@@ -122,7 +122,7 @@ def test_segments_count_a_paused_stroke_once_and_a_cut_one_as_partial():
 def test_the_felt_error_splits_additively_by_the_planners_status_and_names_the_largest():
     from types import SimpleNamespace
 
-    from flexsheet.analysis.report_analysis import felt_by_status, status_class
+    from flexsheet.analysis.report_analysis import felt_by_status, plan_statuses, status_class
 
     assert status_class("rate_limited;ik:left:limit:J3;unreachable") == "unreachable"
     assert status_class("rate_limited;reach:nearest") == "nearest"
@@ -132,7 +132,7 @@ def test_the_felt_error_splits_additively_by_the_planners_status_and_names_the_l
     plans = [(0.0, SimpleNamespace(source_stamp=float(x), status=s))
              for x, s in zip(t[:9], status, strict=True)]
     dtheta = np.array([0.2] * 6 + [8.0] * 3 + [1.0])
-    split = felt_by_status({"/sheet/target": plans}, t, dtheta)
+    split = felt_by_status(plan_statuses({"/sheet/target": plans}), t, dtheta)
     assert split["unreachable"]["share"] == pytest.approx(0.3)
     assert split["unreachable"]["mean_deg"] == pytest.approx(8.0)
     assert split["unreachable"]["of_mean"] == pytest.approx(24.0 / 26.2)
