@@ -339,6 +339,8 @@ CHEAP: dict[str, tuple[str, str]] = {
         "flexsheet experiment objects --quick --out /tmp/objects_quick",
         "flexsheet experiment objects --draws 8 --reference --out docs/figures/objects",
         "flexsheet experiment objects --first 3 --draws 1 --out /tmp/objects",
+        "flexsheet experiment reach --draws 6 --out docs/figures/objects/reach",
+        "flexsheet experiment reach --first 3 --draws 1 --samples 6 --out /tmp/reach",
         "flexsheet experiment stability --graph --out docs/figures/stroke/stability",
         "flexsheet experiment stroke_model --out docs/figures/planner",
         "flexsheet experiment stroke_model --out /tmp/s --seeds 1 --display-calib "

@@ -24,6 +24,7 @@ from flexsheet.analysis.report_head import head_summary
 from flexsheet.analysis.report_motion import motion_summary
 from flexsheet.analysis.report_placement import placement
 from flexsheet.analysis.report_softness import (
+    WEBER_FRACTION,
     felt_force,
     follow_lag,
     inclusion_contrast,
@@ -102,6 +103,9 @@ def analyse(bags: Path | list[Path], heartbeats: list | None = None, scene: Scen
     if summary["compliance"]:
         felt = felt_force(d, scene=scene or paper_scene())
         samples = felt.pop("samples", None)
+        if samples:
+            ratio = np.array(samples["felt_n"]) / np.array(samples["requested_n"])
+            felt["by_status"] = force_by_status(plan_statuses(d), np.array(samples["stamp_s"]), ratio)
         if series is not None and samples:
             series["compliance"] = samples
         summary["compliance"]["felt"] = felt
@@ -373,6 +377,25 @@ def felt_by_status(by_src: dict[float, str], t: np.ndarray, dtheta_deg: np.ndarr
         m = cls == c
         out[c] = {"share": float(m.mean()), "mean_deg": float(dtheta_deg[m].mean()),
                   "of_mean": float(dtheta_deg[m].sum() / total) if total > 0.0 else 0.0}
+    return out
+
+
+def force_by_status(by_src: dict[float, str], t: np.ndarray, ratio: np.ndarray) -> dict:
+    """The force presses split by what the planner said of the plan in force at each judged sample (the
+    newest plan whose ``source_stamp`` is at or before its stamp; ``by_src``: :func:`plan_statuses`; class
+    :func:`status_class`, ``"no plan"`` before the first): per class ``share`` of the samples,
+    ``within_15pct`` among them and ``of_misses`` (their share of all samples outside 15 %: the classes'
+    ``of_misses`` add up to 1). ``t`` (N,) s: the samples' stamps; ``ratio`` (N,): felt / requested force."""
+    src = np.array(sorted(by_src))
+    k = np.searchsorted(src, t, side="right") - 1
+    cls = np.array([status_class(by_src[src[i]]) if i >= 0 else "no plan" for i in k.tolist()])
+    miss = np.abs(ratio - 1.0) > WEBER_FRACTION
+    n_miss = int(miss.sum())
+    out = {}
+    for c in sorted(set(cls.tolist())):
+        m = cls == c
+        out[c] = {"share": float(m.mean()), "within_15pct": float(1.0 - miss[m].mean()),
+                  "of_misses": float(miss[m].sum() / n_miss) if n_miss else 0.0}
     return out
 
 

@@ -180,9 +180,9 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
     median, p5, p95), ``"within_15pct"`` (share of samples with |ratio − 1| ≤ 15 %; since the surface look-up
     and the object-depth gate, judged on those samples), ``"per_press"`` (:func:`_per_press`: one median ratio
     per contiguous touch), ``"felt_n"`` and ``"requested_n"`` (force medians, N), ``"felt_stiffness_n_per_m"``
-    (median secant force / depth of the true sheet), ``"samples"`` {depth_m, felt_n, requested_n} (for the
-    chart), ``"target"``, ``"verdict"`` ("met" when within_15pct ≥
-    :data:`WITHIN_TARGET`)}``. Raises ``ValueError`` for a non-positive scale."""
+    (median secant force / depth of the true sheet), ``"samples"`` {depth_m, felt_n, requested_n, stamp_s}
+    (for the chart and the split by the planner's status), ``"target"``, ``"verdict"`` ("met" when
+    within_15pct ≥ :data:`WITHIN_TARGET`)}``. Raises ``ValueError`` for a non-positive scale."""
     scales = planner_scales(d) if scales is None else list(scales)
     bad = [s for _, s in scales if not s > 0.0]
     if bad:
@@ -193,7 +193,7 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
         return {}
     arrival = np.array([r["t"] for r in pressed])
     scale = np.nan_to_num(scales_at(scales, arrival), nan=1.0)
-    felt, req, depth, press = [], [], [], []
+    felt, req, depth, press, stamp = [], [], [], [], []
     if table is not None:
         gains = np.nan_to_num(scales_at(planner_gains(d), arrival), nan=1.0)
         for r, sc, g in zip(pressed, scale, gains, strict=True):
@@ -202,6 +202,7 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
             req.append(table.mapped(r["q"], s.depth, float(sc), float(g))[0])
             depth.append(s.depth)
             press.append(r["press"])
+            stamp.append(s.header.stamp)
         basis = "force_depth"
     else:
         defs = sorted((m for _, m in d.get("/object/deformation", []) if m.contact_force > 0.0),
@@ -218,11 +219,13 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
             req.append(defs[k].contact_force * float(sc))
             depth.append(s.depth)
             press.append(r["press"])
+            stamp.append(s.header.stamp)
         basis = "deformation"
     ok = [i for i, r in enumerate(req) if r > 0.0]
     if not ok:
         return {}
-    felt_a, req_a, dep_a, press_a = (np.array([x[i] for i in ok]) for x in (felt, req, depth, press))
+    felt_a, req_a, dep_a, press_a, st_a = (np.array([x[i] for i in ok])
+                                           for x in (felt, req, depth, press, stamp))
     ratio = felt_a / req_a
     within = float(np.mean(np.abs(ratio - 1.0) <= WEBER_FRACTION))
     gate = "object_depth" if scene is not None else "sheet_depth"
@@ -232,7 +235,8 @@ def felt_force(d: dict[str, list], scales: list[tuple[float, float]] | None = No
             "within_15pct": within, "per_press": _per_press(press_a, ratio),
             "felt_n": float(np.median(felt_a)), "requested_n": float(np.median(req_a)),
             "felt_stiffness_n_per_m": float(np.median(felt_a / dep_a)),
-            "samples": {"depth_m": dep_a.tolist(), "felt_n": felt_a.tolist(), "requested_n": req_a.tolist()},
+            "samples": {"depth_m": dep_a.tolist(), "felt_n": felt_a.tolist(), "requested_n": req_a.tolist(),
+                        "stamp_s": st_a.tolist()},
             "target": f">= {WITHIN_TARGET:.2f} of pressed samples (>= {MIN_DEPTH * 1e3:g} mm into the "
                       f"{'object' if scene is not None else 'sheet'}) with the true force within "
                       f"± {100 * WEBER_FRACTION:.0f} % of the mapped request at the surface contact (Weber "

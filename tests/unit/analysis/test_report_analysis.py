@@ -140,3 +140,21 @@ def test_the_felt_error_splits_additively_by_the_planners_status_and_names_the_l
     assert sum(v["of_mean"] for v in split.values()) == pytest.approx(1.0)
     # the shares times the means give the felt mean back
     assert sum(v["share"] * v["mean_deg"] for v in split.values()) == pytest.approx(dtheta.mean())
+
+
+def test_the_force_misses_split_by_the_plan_in_force_at_each_sample():
+    from types import SimpleNamespace
+
+    from flexsheet.analysis.report_analysis import force_by_status, plan_statuses
+
+    plans = [(0.0, SimpleNamespace(source_stamp=x, status=s))
+             for x, s in ((1.0, "ok"), (2.0, "rate_limited;ik:right:limit:J5;unreachable"), (3.0, "ok"))]
+    t = np.array([0.5, 1.0, 1.5, 2.0, 2.5, 2.9, 3.5, 4.0])       # the first before any plan
+    ratio = np.array([1.0, 1.0, 1.3, 0.5, 0.6, 1.0, 1.1, 0.8])   # misses: 1.3, 0.5, 0.6, 0.8
+    split = force_by_status(plan_statuses({"/sheet/target": plans}), t, ratio)
+    assert split["no plan"] == {"share": 0.125, "within_15pct": 1.0, "of_misses": 0.0}
+    assert split["unreachable"]["share"] == pytest.approx(3 / 8)
+    assert split["unreachable"]["within_15pct"] == pytest.approx(1 / 3)
+    assert split["unreachable"]["of_misses"] == pytest.approx(0.5)
+    assert split["ok"]["of_misses"] == pytest.approx(0.5)                # 1.3 at 1.5 s and 0.8 at 4.0 s
+    assert sum(v["of_misses"] for v in split.values()) == pytest.approx(1.0)
