@@ -14,7 +14,11 @@ on the simulated clock, on TCP ports of its own (the world's default script: a 1
 * ``span_p99_mm``, ``strain_over_plan``, ``placement_p99_mm`` (``sheet``, ``placement``);
 * ``bridge_holds``: joint-state cycles each bridge refused its target, by reason (``hold:limit:J3``, …; not
   ``hold:no_target``, before the first target), and ``keepout_violations``;
-* ``fem_model``: which force model the FEM node served (``nonlinear`` table, or ``linear``).
+* ``fem_model``: which model the FEM node served the presses (``/object/deformation`` ≥ 2 mm deep) with, from
+  each message's ``method``: ``nonlinear`` (a table: every press), ``linear`` (none), or ``mixed`` (a scene's
+  table built on first use arrived during the run); ``fem_presses``: per press (from ≥ 2 mm until < 1 mm) its
+  start (s since the first deformation) and model; ``fem_nonlinear_from_s``: the first press message a table
+  served.
 
 With ``--reference`` the paper's cylinder runs too on the same truth seed: the targets "felt Δθ at 30 s ≤ 2 ×
 the cylinder's" are judged against it. Writes ``objects.json`` and ``objects.png`` (one chart, the same
@@ -39,7 +43,7 @@ from flexsheet.runtime.ports import free_port
 
 log = logging.getLogger(__name__)
 
-__all__ = ["measure_object", "bridge_holds", "verdicts", "main", "TARGETS"]
+__all__ = ["measure_object", "bridge_holds", "fem_models", "verdicts", "main", "TARGETS"]
 
 #: the issue's targets per object (units in the keys)
 TARGETS = {"felt_30_vs_cylinder": 2.0, "residual_lag_ms": 30.0, "force_within_15pct": 0.95, "saturated": 0.05,
@@ -47,6 +51,10 @@ TARGETS = {"felt_30_vs_cylinder": 2.0, "residual_lag_ms": 30.0, "force_within_15
            "keepout_violations": 0}
 #: simulated seconds per run: the world's default script ends at 63 s
 DURATION = 70.0
+#: ``ObjectDeformation.method`` values of the FEM's nonlinear tables (the rest: its linear model)
+NONLINEAR_METHODS = ("snapshots", "path_snapshots", "corotational")
+#: a deformation at least this deep (m) is a press (the compliance figure's presses)
+PRESS_DEPTH = 0.002
 
 
 def bridge_holds(bag: Path) -> dict[str, int]:
@@ -63,6 +71,41 @@ def bridge_holds(bag: Path) -> dict[str, int]:
     return dict(sorted(c.items()))
 
 
+def fem_models(bag: Path) -> dict:
+    """``fem_model``, ``fem_presses``, ``fem_nonlinear_from_s`` (module doc) from the bag's
+    ``/object/deformation``."""
+    t0, first_nl, presses, cur = None, None, [], None
+    for m in read_bag(bag, ["/object/deformation"]):
+        try:
+            d = decode_any(m.frames)
+            t, nl = float(d.header.stamp), d.method in NONLINEAR_METHODS
+            deep = d.valid and d.depth >= PRESS_DEPTH
+        except (DecodeError, AttributeError):
+            continue
+        t0 = t if t0 is None else t0
+        if deep and nl and first_nl is None:
+            first_nl = round(t - t0, 3)
+        if deep and cur is None:
+            cur = {"start_s": round(t - t0, 3), "models": set()}
+            presses.append(cur)
+        if deep:
+            cur["models"].add("nonlinear" if nl else "linear")
+        elif not d.valid or d.depth < PRESS_DEPTH / 2:       # released (hysteresis: noise about 2 mm)
+            cur = None
+    for p in presses:
+        p["model"] = "mixed" if len(p["models"]) > 1 else p["models"].pop()
+        del p["models"]
+    models = {p["model"] for p in presses}
+    return {"fem_model": None if not models else (models.pop() if len(models) == 1 else "mixed"),
+            "fem_presses": presses, "fem_nonlinear_from_s": first_nl}
+
+
+def _fem_model_from_log(log_text: str) -> dict:
+    """Without a bag: the FEM's model as its start-up line names it (no presses)."""
+    return {"fem_model": "linear" if "serving the LINEAR model" in log_text else "nonlinear",
+            "fem_presses": [], "fem_nonlinear_from_s": None}
+
+
 def _get(d: dict, *path, default=None):
     for k in path:
         if not isinstance(d, dict) or k not in d:
@@ -72,10 +115,11 @@ def _get(d: dict, *path, default=None):
 
 
 def measure_object(summary: dict, bag: Path | None, log_text: str = "") -> dict:
-    """The per-object figures (module doc) from a run's ``summary`` and bag (``None``: no hold counts) and its
-    launch log's text (the FEM's model)."""
+    """The per-object figures (module doc) from a run's ``summary`` and bag (``None``: no hold counts, the
+    FEM's model guessed from the launch log's text ``log_text``)."""
     felt = _get(summary, "table1", "felt", default={}) or {}
-    holds = bridge_holds(bag) if bag is not None and bag.exists() else {}
+    has_bag = bag is not None and bag.exists()
+    holds = bridge_holds(bag) if has_bag else {}
     return {
         "felt_dtheta_deg": {row: _get(felt, row, "dtheta_mean_deg") for row in ("10", "30")},
         "felt_30_by_status": _get(summary, "table1", "by_status", "30"),
@@ -92,7 +136,7 @@ def measure_object(summary: dict, bag: Path | None, log_text: str = "") -> dict:
         "bridge_holds": sum(holds.values()),
         "bridge_holds_by_status": holds,
         "keepout_violations": _get(summary, "safety", "keepout_violations"),
-        "fem_model": "linear" if "serving the LINEAR model" in log_text else "nonlinear",
+        **(fem_models(bag) if has_bag else _fem_model_from_log(log_text)),
     }
 
 

@@ -12,7 +12,8 @@ from its file. What is built for it:
   table is the nonlinear snapshot table (:mod:`flexsheet.fem.snapshots`);
 - any other scene: its gmsh mesh refined along its stroke and its
   :class:`~flexsheet.fem.scene_model.SceneModel`; its table is a sphere's sphere table, else the path table
-  along its stroke (:func:`flexsheet.fem.scene_model.attach_scene_table`).
+  along its stroke (:func:`flexsheet.fem.scene_model.attach_scene_table`), else the path table built on the
+  scene's first use (:mod:`flexsheet.fem.first_use`; the FEM node builds it when none is stored).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from flexsheet.fem.cache import ArrayCache
 from flexsheet.fem.choose import choose, choose_fem_model, load_model_table, load_table
 from flexsheet.fem.config import FemConfig
 from flexsheet.fem.contact import finger_at
+from flexsheet.fem.first_use import load_first_use_table
 from flexsheet.fem.material import Material
 from flexsheet.fem.mesh import MeshSpec
 from flexsheet.fem.realtime import RealtimeModel
@@ -38,7 +40,8 @@ from flexsheet.model.scenes import Scene, is_paper_cylinder
 
 __all__ = ["uses_cylinder_mesh", "launch_arc_deg", "CylinderChoice", "choose_cylinder_model", "build_model",
            "TableState",
-           "attach_table", "snapshots_message", "served_model", "served_finger", "scene_update_ms"]
+           "attach_table", "path_table_message", "snapshots_message", "served_model", "served_finger",
+           "scene_update_ms"]
 
 
 def uses_cylinder_mesh(sc: Scene) -> bool:
@@ -158,6 +161,11 @@ def attach_table(model: RealtimeModel | SceneModel, sc: Scene, cfg: FemConfig) -
                           f"linear {desc} (model=linear)")
     try:
         kind, where = attach_scene_table(model, cache)
+        if where is None and kind == "path":
+            first = load_first_use_table(model, cache)
+            if first is not None:
+                model.attach_path_table(first)
+                where = "cache (built on first use)"
     except ValueError as exc:
         msg = f"{name}: nonlinear table unusable ({exc}) - serving LINEAR"
         return TableState("table", None, msg, logging.ERROR, f"linear {desc} (table unusable)",
@@ -165,18 +173,25 @@ def attach_table(model: RealtimeModel | SceneModel, sc: Scene, cfg: FemConfig) -
     if where is None:
         return TableState(kind, None, f"{name}: no nonlinear {kind} table cached - serving the LINEAR model "
                           f"(build it with `flexsheet experiment fem --scene {sc.source or 'SCENE.yaml'} "
-                          "--node-table --out DIR`)",
+                          "--node-table --out DIR`; the FEM node builds a path table on first use with "
+                          "table_build=true)",
                           logging.WARNING, f"linear {desc} (no {kind} table stored)", missing=True)
     if kind == "sphere":
         sm = model.snapshots
         msg = (f"{name}: nonlinear sphere snapshots loaded from {where}: polar angle <= "
                f"{np.degrees(sm.alphas[-1]):.0f} deg, depth <= {sm.depth_max * 1e3:.0f} mm; linear elsewhere")
     else:
-        pt = model.path_table
-        msg = (f"{name}: nonlinear path table loaded from {where}: {len(pt.fractions)} stations along the "
-               f"stroke, depth <= {pt.depth_max * 1e3:.0f} mm, within {pt.reach * 1e3:.0f} mm of the stroke; "
-               "linear elsewhere")
+        msg = path_table_message(sc, model, f"loaded from {where}")
     return TableState(kind, where, msg, logging.INFO, f"linear {desc} + the {kind} table ({where})")
+
+
+def path_table_message(sc: Scene, model: SceneModel, how: str) -> str:
+    """The diagnostics line of scene ``sc``'s attached path table, ``how`` it came ("loaded from cache",
+    "built on first use in 300 s", ...)."""
+    pt = model.path_table
+    return (f"fem: scene {sc.name!r}: nonlinear path table {how}: {len(pt.fractions)} stations along the "
+            f"stroke, depth <= {pt.depth_max * 1e3:.0f} mm, within {pt.reach * 1e3:.0f} mm of the stroke; "
+            "linear elsewhere")
 
 
 def _attach_cylinder_table(model: RealtimeModel, sc: Scene, cfg: FemConfig, cache: ArrayCache,

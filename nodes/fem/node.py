@@ -16,8 +16,13 @@ chosen from the accuracy table, any other scene on its gmsh mesh along the strok
 :func:`flexsheet.fem.served.attach_table` attaches the scene's nonlinear table where one is stored (the
 cylinder's snapshot table, a sphere's table, a path table along the stroke; the cylinder's model table may
 pick linear instead, :func:`flexsheet.fem.choose.choose_fem_model`). Without a stored table the node serves
-the linear model and the diagnostics message names the command that builds it; the cylinder's snapshots can
-also be built in a background thread at low priority (``snapshot_build``). The diagnostics message tells which
+the linear model; any scene but the cylinder then has its path table built on first use (``table_build``, on
+by default: :class:`flexsheet.fem.first_use_build.FirstUseBuild`, a worker process at idle priority; on the
+wall clock the linear model serves meanwhile, a simulated clock waits for it as for any
+:meth:`~flexsheet.runtime.node.Node.background` work, so no table arrives at a host-dependent simulated
+moment; progress in the log and the diagnostics), attaches it and republishes ``/object/force_depth`` from
+it; a failed build is logged and the linear model keeps serving. The cylinder's snapshots can be built
+in a background thread at low priority (``snapshot_build``). The diagnostics message tells which
 model is served and why. Every ``ObjectDeformation`` carries ``scene_key`` = the scene's
 :meth:`~flexsheet.model.scenes.Scene.key` so that the planner uses the FEM's dF/dd only for the object it
 presents. A lost marker publishes the rest shape with ``valid=False, status="rejected:marker_lost"``. NaN,
@@ -48,11 +53,12 @@ from flexsheet.model.timing import LAB
 from flexsheet.runtime.node import InputRejected, Node
 from flexsheet.runtime.qos import QoS
 from messages import Fingertip, ObjectDeformation, ObjectForceDepth, topics
+from nodes.fem.first_use import FirstUseTable
 from nodes.fem.params import FemParams
 
 __all__ = ["FemNode"]
 
-class FemNode(Node):
+class FemNode(FirstUseTable, Node):
     """See the module docstring."""
 
     Params = FemParams
@@ -67,6 +73,7 @@ class FemNode(Node):
         self.scene_key = self.scene.key()
         self.log.info("fem: scene: %s", self.scene.describe())
         self._lock = threading.Lock()
+        self._first_use = None
         cfg = p.fem_config()
         self.model, built = await asyncio.to_thread(build_model, self.scene, cfg)
         self.log.info("%s", built)
@@ -90,6 +97,16 @@ class FemNode(Node):
         await asyncio.to_thread(self._publish_force_depth)
         if isinstance(self.model, SceneModel):     # its sparse fallback serves any push off the stroke's band
             await self.background(self._warm_sparse, "fem-sparse")
+            if table.missing and table.kind == "path" and p.table_build:
+                self._start_first_use(cfg.cache_dir)
+            if self._first_use is not None:       # a simulated clock waits for it (Node.background)
+                await self.background(self._first_use.join, "fem-first-use-wait")
+
+    async def teardown(self) -> None:
+        """End a first-use build still running (its finished pushes stay cached: the next start resumes)."""
+        if self._first_use is not None:
+            self._first_use.stop()
+        await super().teardown()
 
     def _publish_force_depth(self) -> None:
         """Push the served model along the stroke (:func:`flexsheet.fem.force_depth.build_force_depth`) and

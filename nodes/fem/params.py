@@ -51,8 +51,11 @@ FemParams = params_model(
     scene's table where stored; for the cylinder the model table decides), "linear" (no table) or "snapshots";
     ``snapshot_build``: build the cylinder's missing snapshots in a background thread (heavy: tens of minutes
     on a 2-core machine; else run ``flexsheet experiment fem --node-table``); ``snapshot_axial_max`` m:
-    largest axial offset of the push served by the cylinder's snapshots (translation along the axis). Every
-    param but ``scene`` is a field of — defined, defaulted and range-checked in —
+    largest axial offset of the push served by the cylinder's snapshots (translation along the axis);
+    ``table_build``: a scene with no stored nonlinear path table (a new or drawn object) is served its linear
+    model while the table is built on first use in a worker process at idle priority and cached by the
+    scene's key, then served (:mod:`flexsheet.fem.first_use`; needs ``cache_dir``). Every param but
+    ``scene`` and ``table_build`` is a field of — defined, defaulted and range-checked in —
     :class:`flexsheet.fem.config.FemConfig`; ``fem_config()`` builds it. Removed params
     (:data:`REMOVED_PARAMS`: ``E``, ``nu``, ``finger_radius``) are refused with where their setting went.
     """,
@@ -63,4 +66,6 @@ FemParams = params_model(
     module=__name__,
     scene=(str | None, Field(default=None, description="scene file (launch/scenes/*.yaml); none: "
                                                        "launch/scenes/cylinder.yaml, the paper's cylinder")),
+    table_build=(bool, Field(default=True, description="build a scene's missing nonlinear path table on "
+                                                       "first use, in the background (linear meanwhile)")),
 )

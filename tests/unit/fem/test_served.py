@@ -59,3 +59,35 @@ def test_only_the_paper_cylinder_as_shipped_uses_the_cylinder_mesh():
     assert not uses_cylinder_mesh(_cylinder(support={"kind": "half_space", "point": [-0.06, 0.0, 0.0],
                                                      "normal": [1.0, 0.0, 0.0], "tolerance": 0.0005}))
     assert not uses_cylinder_mesh(load_scene(SCENES_DIR / "sphere.yaml"))
+
+
+def test_a_scene_without_a_stored_table_gets_its_first_use_table_and_a_full_table_wins(tmp_path):
+    """The sticky sphere with a short stroke (tests/unit/conftest.py) has no stored path table: linear, named
+    missing; with its first-use table cached (flexsheet/fem/first_use.py's key; a closed-form table) that
+    table is attached and said to be the first use's; with a full path table under the full key too, the full
+    one is attached."""
+    from test_path_snapshots import _table
+
+    from flexsheet.fem.cache import ArrayCache
+    from flexsheet.fem.first_use import first_use_key
+    from flexsheet.fem.path_snapshots import path_table_key
+    from unit.conftest import _scene
+
+    sc, cfg = _scene(), dataclasses.replace(COARSE, cache_dir=str(tmp_path))
+    m, _ = build_model(sc, cfg)
+    t = attach_table(m, sc, cfg)
+    assert t.missing and t.kind == "path" and t.where is None and m.path_table is None
+    assert "table_build=true" in t.message
+    cache = ArrayCache(str(tmp_path))
+    first = _table(m)
+    cache.save("pathsnap", first_use_key(sc, m), first)
+    m, _ = build_model(sc, cfg)
+    t = attach_table(m, sc, cfg)
+    assert t.where == "cache (built on first use)" and not t.missing, t
+    assert "nonlinear path table loaded from cache (built on first use): 3 stations" in t.message, t.message
+    assert m.path_table is not None and len(m.path_table.fractions) == 3
+    full = dict(first, fractions=np.array([0.0, 0.4, 1.0]))
+    cache.save("pathsnap", path_table_key(m.scene_key, m.cache_key), full)
+    m, _ = build_model(sc, cfg)
+    t = attach_table(m, sc, cfg)
+    assert t.where == "cache" and np.allclose(m.path_table.fractions, [0.0, 0.4, 1.0]), t
