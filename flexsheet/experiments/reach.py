@@ -135,7 +135,7 @@ def chart(result: dict, path: Path) -> None:
     n_full = sum(result["objects"][m]["share"]["any"] == 1.0 for m in names)
     ax.set_title(f"Which strokes the two arms can present at all: {n_full}/{len(names)} wholly "
                  f"(verdict: {'met' if n_full == len(names) else 'MISSED by the arms'})", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -158,7 +158,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    result = {"samples": args.samples, "psi_step_deg": PSI_STEP_DEG, "offset_max_m": OFFSET_MAX,
+    result = {"title": "Which strokes the two arms can present at all",
+              "units": "share of the stroke's samples (0..1); tilt in deg from the home sheet's normal",
+              "target": "1.0: every point of every stroke presentable by some pose", "samples": args.samples,
+              "psi_step_deg": PSI_STEP_DEG,
+              "offset_max_m": OFFSET_MAX,
               "offset_step_m": OFFSET_STEP, "stretch": STRETCH, "objects": {}}
     jobs = [("cylinder", None, "the paper's cylinder")] + [
         (f"draw{k}", write_scene(k, out / f"draw{k}"), None)
@@ -172,9 +176,11 @@ def main(argv: list[str] | None = None) -> int:
               f"{100 * r['share']['psi']:.0f} % with a turn, {100 * r['share']['any']:.0f} % by any pose; "
               f"tilt asked up to {r['largest_tilt_asked_deg']:.1f} deg", flush=True)
         (out / "reach.json").write_text(json.dumps(result, indent=1))
+    short = [n for n, o in result["objects"].items() if o["share"]["any"] < 1.0]
+    result["verdict"] = "met" if not short else f"MISSED by the arms: {', '.join(short)}"
+    (out / "reach.json").write_text(json.dumps(result, indent=1))
     chart(result, out / "reach.png")
     print(f"[reach] wrote {out / 'reach.json'} and reach.png", flush=True)
-    short = [n for n, o in result["objects"].items() if o["share"]["any"] < 1.0]
     print(f"[reach] not wholly presentable by any pose: {', '.join(short) or 'none'}", flush=True)
     return 0
 
