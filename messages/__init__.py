@@ -6,6 +6,7 @@ from messages.diagnostics import Heartbeat, TopicStats
 from messages.fem import ObjectDeformation, ObjectForceDepth
 from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
+from messages.task import TaskMark
 from messages.topics import Topic
 from messages.vision import EyePose, Fingertip, StereoCalibration, StereoFrame
 from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
@@ -14,11 +15,11 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.SCHEMA: cls
     for cls in (StereoFrame, StereoCalibration, Fingertip, SheetTarget, ArmTarget, ArmJointState,
                 ObjectDeformation, ObjectForceDepth, RenderedFrame, ProjectorImage, FingerTruth, SheetState,
-                Heartbeat, EyePose, HeadTruth, ContactTruth)
+                Heartbeat, EyePose, HeadTruth, ContactTruth, TaskMark)
 }
 
 __all__ = ["ArmJointState", "ArmTarget", "ContactTruth", "DISPLAY_FRAME", "EyePose", "Fingertip",
            "FingerTruth", "HeadTruth", "Header", "Heartbeat",
            "MESSAGE_TYPES", "Message", "ObjectDeformation", "ObjectForceDepth", "ProjectorImage",
            "RenderedFrame", "SheetState", "SheetTarget",
-           "StereoCalibration", "StereoFrame", "Topic", "TopicStats", "check_finite", "ndarray"]
+           "StereoCalibration", "StereoFrame", "TaskMark", "Topic", "TopicStats", "check_finite", "ndarray"]

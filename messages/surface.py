@@ -12,7 +12,6 @@ __all__ = ["SheetTarget", "ArmTarget"]
 
 class SheetTarget(Message):
     """Where the sheet must be: the tangent plane of the virtual object at the contact point.
-
     All vectors in the display frame. ``contact_point`` (3,) m: the point of the virtual surface the finger
     meets (paper §V-A, point A or B). ``normal`` (3,): unit outward surface normal there (the sheet's normal,
     pointing toward the user). ``axis_u`` (3,), ``axis_v`` (3,): unit in-plane axes of the sheet (``axis_u``
@@ -45,7 +44,6 @@ class SheetTarget(Message):
 
 class ArmTarget(Message):
     """End-effector (sheet-clamp tool frame) target pose for one arm, in the display frame.
-
     ``pose`` (4, 4): homogeneous transform T_display_clamp, m. ``arm``: "left" or "right".
     ``source_stamp``: exposure stamp of the source fingertip, s. ``status`` as in :class:`SheetTarget`.
     ``pull`` N: the sheet's pull on this clamp toward the sheet's centre at this target (the planned clamp

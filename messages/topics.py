@@ -14,6 +14,7 @@ from messages.diagnostics import Heartbeat
 from messages.fem import ObjectDeformation, ObjectForceDepth
 from messages.render import ProjectorImage, RenderedFrame
 from messages.surface import ArmTarget, SheetTarget
+from messages.task import TaskMark
 from messages.vision import EyePose, Fingertip, StereoCalibration, StereoFrame
 from messages.world import ContactTruth, FingerTruth, HeadTruth, SheetState
 
@@ -56,12 +57,15 @@ SHEET_STATE = Topic("/world/sheet", SheetState, nominal_hz=50.0)
 HEAD_TRUTH = Topic("/world/head", HeadTruth, nominal_hz=100.0)
 CONTACT_TRUTH = Topic("/world/contact", ContactTruth, nominal_hz=50.0)
 DIAGNOSTICS = Topic("/diagnostics", Heartbeat, nominal_hz=1.0)
+#: the target mark the application shows (the world node in simulation); the planner pre-positions the sheet
+#: there while the finger is away (an optional input: nothing publishes it in the lab yet)
+TASK_MARK = Topic("/task/mark", TaskMark, nominal_hz=50.0)
 
 ALL = [STEREO, STEREO_PREVIEW, CALIBRATION, FINGERTIP, SHEET_TARGET, ARM_LEFT_TARGET, ARM_RIGHT_TARGET,
        ARM_LEFT_STATE,
        ARM_RIGHT_STATE, DEFORMATION, RENDERED, PROJECTOR_IMAGE, FINGER_TRUTH, SHEET_STATE, DIAGNOSTICS,
        EYE_POSE,
-       HEAD_TRUTH, CONTACT_TRUTH, FORCE_DEPTH]
+       HEAD_TRUTH, CONTACT_TRUTH, FORCE_DEPTH, TASK_MARK]
 BY_NAME = {t.name: t for t in ALL}
 
 

@@ -11,7 +11,6 @@ __all__ = ["StereoFrame", "StereoCalibration", "Fingertip", "EyePose"]
 
 class StereoFrame(Message):
     """A synchronised stereo pair from the camera node (mono8).
-
     ``left``, ``right``: uint8 arrays of shape (H, W), raw (unrectified) images of the left and right camera.
     ``exposure_stamp``: mid-exposure time, s (sender's clock); ``header.stamp``: the time the frame was handed
     to the graph (after readout/transfer; for the twin, after rendering), s. ``exposure_time``: shutter time,
@@ -32,7 +31,6 @@ class StereoFrame(Message):
 
 class StereoCalibration(Message):
     """Stereo calibration of the camera pair, published latched (same content as ``calibrate stereo``'s YAML).
-
     Intrinsics ``K1``, ``K2`` (3, 3) in px; distortion ``D1``, ``D2`` (5,) OpenCV (k1, k2, p1, p2, k3);
     ``R`` (3, 3) and ``T`` (3,) in m map left-camera coordinates to right-camera coordinates
     (x_r = R x_l + T, OpenCV ``stereoCalibrate``); rectification ``R1``, ``R2`` (3, 3), projections
@@ -62,7 +60,6 @@ class StereoCalibration(Message):
 
 class Fingertip(Message):
     """Triangulated fingertip marker position in the display frame.
-
     ``position`` (3,) m, display frame; ``covariance`` (3, 3) m², from pixel-noise propagation. ``valid`` is
     False when the marker is lost or gated out: then ``position`` is the zero vector and must not be used
     (never a stale or invented position). ``predicted_position`` (3,) m is the constant-velocity Kalman
@@ -89,7 +86,6 @@ class Fingertip(Message):
 
 class EyePose(Message):
     """The viewer's tracked glasses and eyes from the head camera (:mod:`flexsheet.vision.glasses`).
-
     ``header.stamp`` is the frame's mid-exposure time (s). ``position`` (3,) m and ``rotation`` (3, 3) (axes
     as columns): the glasses frame in the display frame; ``left``/``right``/``eye`` (3,) m: both eyes and
     their midpoint, display frame, at the stamp (the eye offset and IPD are the lab's measured ones);

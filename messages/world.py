@@ -11,7 +11,6 @@ __all__ = ["FingerTruth", "HeadTruth", "SheetState"]
 
 class FingerTruth(Message):
     """True position of the simulated fingertip marker (drives the camera twin; never used by the planner).
-
     ``position`` (3,) m and ``velocity`` (3,) m/s in the display frame. The script segment being played, as
     typed fields: ``segment`` (its index in the world's script, 0-based), ``mode`` ("stroke", "push",
     "stroke_push"), ``moving_time`` (s, the segment's time for the mark's travel; Table I's row key) and
@@ -41,7 +40,6 @@ class SheetState(Message):
     kinematics (true bases, link lengths, joint zero offsets; :class:`flexsheet.twin.truth.TwinTruth`) of the
     arms' measured joints, and ``membrane`` from the independent nonlinear sheet FEM
     (:mod:`flexsheet.model.sheet_fem`). Estimators never read it; the report and the measurement camera do.
-
     ``origin`` (3,) m: sheet centre; ``normal`` (3,), ``axis_u`` (3,): unit vectors (display frame).
     ``corners`` (4, 3) m: sheet corners in order around the sheet. ``pushed_point`` (3,) m: the deepest
     point of the finger's depression (equals ``origin`` projection when not pushed). ``depth`` m:
@@ -68,7 +66,6 @@ class ContactTruth(Message):
     """The finger's true contact with the true sheet in the simulated world: what the finger feels. From the
     twin's sheet FEM (:mod:`flexsheet.model.sheet_fem`, its table at the true clamp strain); the report
     compares it with the force the object asks. Estimators never read it; a lab measures it with a load cell.
-
     ``touching``: the finger is behind the sheet's plane within the clamps. ``depth`` m: the indentation along
     the sheet's normal. ``force`` N: the normal contact force (0 while no table is ready). ``point`` (3,) m:
     the bottom of the dent (the finger's apex on the pushed sheet; not the contact on the object's surface),
@@ -90,7 +87,6 @@ class ContactTruth(Message):
 class HeadTruth(Message):
     """True pose of the simulated viewer's head (drives the head camera twin and the report; never used by an
     estimator).
-
     ``position`` (3,) m: the glasses frame's origin (the bridge of the stereo glasses), display frame;
     ``rotation`` (3, 3): the glasses frame's axes as columns (x from the right lens to the left lens, y up,
     z toward the sheet when worn; :mod:`flexsheet.calibration.eye`). ``left``/``right``/``eye`` (3,) m: the

@@ -4,9 +4,9 @@ extension, :mod:`flexsheet.display.launch`).
 
 A required input is one without which the node does nothing useful: the triangulator's stereo pairs and
 calibration, the planner's and the FEM's fingertip, an arm bridge's target. The rest (joint states, the eye
-pose, the FEM's deformation, the world's truth) are optional: a node runs without them, as in a replay of the
-planner alone or the lab without a head camera. ``tests/unit/runtime/test_graph_builder.py`` compares these
-with the publishers and subscriptions in the node types' code.
+pose, the FEM's deformation, the task's mark, the world's truth) are optional: a node runs without them, as in
+a replay of the planner alone or the lab without a head camera. ``tests/unit/runtime/test_graph_builder.py``
+compares these with the publishers and subscriptions in the node types' code.
 """
 
 from __future__ import annotations
@@ -38,7 +38,8 @@ NODE_TOPICS: dict[str, Callable[[Mapping[str, Any]], NodeTopics]] = {
     "arm_controller_sim": lambda p: NodeTopics(),       # its bridge reaches it over Modbus TCP, not a topic
     "fem": lambda p: NodeTopics(_names(T.DEFORMATION, T.FORCE_DEPTH), _names(T.FINGERTIP)),
     "renderer": lambda p: NodeTopics(_names(T.RENDERED, T.PROJECTOR_IMAGE)),
-    "world": lambda p: NodeTopics(_names(T.FINGER_TRUTH, T.SHEET_STATE, T.CONTACT_TRUTH, T.HEAD_TRUTH)),
+    "world": lambda p: NodeTopics(_names(T.FINGER_TRUTH, T.SHEET_STATE, T.CONTACT_TRUTH, T.HEAD_TRUTH,
+                                         T.TASK_MARK)),
     "head_camera": lambda p: NodeTopics(_names(T.EYE_POSE)),
     "viz": lambda p: NodeTopics(),                       # subscribes what a viewer opens
 }

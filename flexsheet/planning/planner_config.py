@@ -38,7 +38,11 @@ class PlannerConfig:
     (:class:`flexsheet.planning.pose_choice.PoseChoice`, with the arms' IK): candidates every ``psi_step`` rad
     within ±``psi_range`` rad of the paper's rule (0: the paper's rule alone), their look-ahead rolls up to
     ``psi_lookahead`` rad, a new choice only when better by ``psi_hysteresis`` (score units: a share of a
-    joint's range), chosen every ``psi_period`` s. Raises ``ValueError`` on bad values."""
+    joint's range), chosen every ``psi_period`` s. With ``use_mark``, while the finger is away and the
+    application shows a target mark (:class:`flexsheet.planning.landing.Landing`): the sheet waits at it,
+    ``preposition_offset`` m outside the object, closing onto it over ``preposition_blend`` m above
+    ``touch_distance`` (the mark blends to the fingertip's own projection within ``touch_distance``); a mark
+    older than ``mark_timeout`` s is not used. Raises ``ValueError`` on bad values."""
 
     touch_distance: float = 0.002
     release_distance: float = 0.006
@@ -60,6 +64,10 @@ class PlannerConfig:
     psi_lookahead: float = 0.6
     psi_hysteresis: float = 0.05
     psi_period: float = 0.1
+    use_mark: bool = False
+    preposition_offset: float = 0.003
+    preposition_blend: float = 0.008
+    mark_timeout: float = 1.0
     material: SheetMaterial = field(default_factory=SheetMaterial)
     limits: MotionLimits = field(default_factory=MotionLimits)
     reach: ReachModel = field(default_factory=ReachModel)
@@ -87,7 +95,9 @@ class PlannerConfig:
             raise ValueError(f"pose_velocity_cutoff must be in (0, 50] Hz, got {self.pose_velocity_cutoff!r}")
         if not (math.isfinite(self.psi_range) and 0.0 <= self.psi_range <= math.pi / 2 + 1e-9):
             raise ValueError(f"psi_range must be in [0, pi/2] rad, got {self.psi_range!r}")
-        for k in ("psi_step", "psi_lookahead", "psi_period"):
+        if not (math.isfinite(self.preposition_offset) and 0.0 <= self.preposition_offset <= 0.02):
+            raise ValueError(f"preposition_offset must be in [0, 0.02] m, got {self.preposition_offset!r}")
+        for k in ("psi_step", "psi_lookahead", "psi_period", "preposition_blend", "mark_timeout"):
             object.__setattr__(self, k, check_positive(k, getattr(self, k)))
         if not (math.isfinite(self.psi_hysteresis) and self.psi_hysteresis >= 0.0):
             raise ValueError(f"psi_hysteresis must be finite and >= 0, got {self.psi_hysteresis!r}")

@@ -7,7 +7,9 @@ Paper §V-A and Fig. 7, generalised:
   commanded to the tangent plane at A, so the finger meets it there. The sheet's in-plane axis ``axis_u`` is
   the reference direction (``u_ref``, +y: the clamp line at home) projected onto the tangent plane, turned
   by the ψ the arms' IK chooses (:class:`~flexsheet.planning.pose_choice.PoseChoice`). A rolled offset left
-  from a previous touch decays with time constant ``recentre_time``.
+  from a previous touch decays with time constant ``recentre_time``. With the application's target mark
+  (:meth:`SurfacePlanner.set_mark`) the sheet waits at the landing it predicts, a few mm outside
+  (:class:`~flexsheet.planning.landing.Landing`).
 * **Touching** (within ``touch_distance``, released beyond ``release_distance``: hysteresis): the sheet
   rolls on the object without slip. Each update the contact moves on the surface from B₋ to B; the sheet
   rotates by the smallest rotation taking the old normal to the new one (rolling without spin, i.e.
@@ -84,6 +86,7 @@ from flexsheet.model.vec import (
     rot_from_cols,
     sub,
 )
+from flexsheet.planning.landing import Landing
 from flexsheet.planning.limits import RateLimiter
 from flexsheet.planning.plan import Hold, Plan
 from flexsheet.planning.planner_config import PlannerConfig
@@ -130,6 +133,7 @@ class SurfacePlanner:
         self.compliance = compliance
         self.limiter = RateLimiter(self.cfg.limits)
         self.pose_filter = PoseFilter(self.cfg.pose_cutoff, self.cfg.pose_velocity_cutoff)
+        self.landing = Landing(shape, self.cfg)     # the application's target mark, :meth:`set_mark`
         #: ψ between touches (:class:`~flexsheet.planning.pose_choice.PoseChoice`); None: the paper's rule
         self.pose_choice = (PoseChoice(shape, self.cfg, arm_reach, guard)
                             if arm_reach is not None and self.cfg.psi_range > 0.0 else None)
@@ -156,6 +160,12 @@ class SurfacePlanner:
         :meth:`update` are then not used (source "table")."""
         self.force_depth = table
         self._tcache = None
+
+    def set_mark(self, t: float, point, normal, visible: bool = True) -> None:
+        """The target mark the application shows at ``t`` s: ``point`` (3,) m, outward ``normal`` (3,); while
+        the finger is away the sheet waits there (:class:`~flexsheet.planning.landing.Landing`); ``visible``
+        False: none. Raises ``ValueError`` for a malformed mark."""
+        self.landing.set_mark(t, point, normal, visible)
 
     def set_pull_limit(self, pull: float | None) -> None:
         """Cap the clamp force at ``pull`` N (the arms' torque limit at their pose,
@@ -245,6 +255,9 @@ class SurfacePlanner:
             return self.hold(Hold.INVALID_STIFFNESS, s.t)
         was_touching = self.touching
         self._touch(dist)
+        self.landing.cfg = cfg                  # until it lands: where the application's mark says it will
+        last = None if self.last is None else (self.last.contact, self.last.normal)
+        q, n, lift = self.landing.place(s.t, s.dt, dist, q, n, last, self.touching)
         su, sv, u = self._roll(q, n, s.dt, was_touching)
         if self.pose_choice is not None and not (self.touching and was_touching):   # ψ: not while rolling
             st0 = self.last.stretch if self.last is not None else cfg.material.min_stretch
@@ -254,7 +267,7 @@ class SurfacePlanner:
         if tr.saturated:
             status.append(tr.saturated)
         su, sv = self._keep_on_sheet(su, sv, tr.stretch, status)
-        origin = axpy(-sv, v, axpy(-su, u, q))
+        origin = axpy(lift, n, axpy(-sv, v, axpy(-su, u, q)))
         o, (nc, uc, vc), st, left, right, margin = limit_and_reach(self, origin, rot_from_cols(n, u, v),
                                                                    tr.stretch, s.dt, status, (su, sv))
         mat = cfg.material

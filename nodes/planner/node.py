@@ -25,8 +25,10 @@ that FEM solved. Publishes ``/sheet/target``, ``/arm/left/target``, ``/arm/right
 ``source_stamp`` = the fingertip's ``exposure_stamp``. The viewer's head (``/eye/pose``) bounds the sheet's
 motion: reduced speed near it, hold and back off before the sheet would enter its keep-out (``head_radius`` +
 ``keepout_margin``), hold while the glasses are lost (:mod:`flexsheet.planning.head_guard`); without a head
-camera this is inactive. A lost marker (``valid=False``) or an input the planner refuses republishes the last
-safe pose with status ``hold:<reason>``; an unreachable target holds the arms and says ``unreachable``.
+camera this is inactive. With the application's target mark (``/task/mark``, optional) the sheet waits for
+the finger where it predicts the landing (:mod:`flexsheet.planning.landing`). A lost marker (``valid=False``)
+or an input the planner refuses republishes the last safe pose with status ``hold:<reason>``; an unreachable
+target holds the arms and says ``unreachable``.
 Malformed or NaN messages are rejected by the codec and counted in diagnostics.
 Time: a fingertip stamped ahead of the node's clock or not newer than the last is handled as
 :meth:`~flexsheet.planning.surface_planner.SurfacePlanner.update` says (``hold:future_stamp``; a backward
@@ -154,6 +156,7 @@ class PlannerNode(Node):
         self.subscribe(topics.DEFORMATION, self.on_deformation, qos=QoS.LATEST)
         self.subscribe(topics.FORCE_DEPTH, self.on_force_depth)
         self.subscribe(topics.EYE_POSE, self.on_eye_pose, qos=QoS.LATEST)
+        self.subscribe(topics.TASK_MARK, self.on_mark, qos=QoS.LATEST)
         # the arms' measured clamp poses, read only where a motion starts from the held sheet (sampled: the
         # 140 Hz joint states are decoded then, not each)
         self._arm_states = {"left": self.sample(topics.ARM_LEFT_STATE),
@@ -176,6 +179,10 @@ class PlannerNode(Node):
         if guard.state != was:
             say = self.log.warning if guard.state == "lost" else self.log.info
             say("viewer's head %s", HEAD_WORDS[guard.state])
+
+    def on_mark(self, msg) -> None:
+        """The application's ``TaskMark`` (:meth:`SurfacePlanner.set_mark`; its ``ValueError``: rejected)."""
+        self.stage.planner.set_mark(msg.header.stamp, msg.point, msg.normal, msg.visible)
 
     def on_force_depth(self, msg: ObjectForceDepth) -> None:
         """The object's force–depth from its FEM (:meth:`PlannerStage.set_force_depth`). A table about another

@@ -22,6 +22,9 @@ truth (:class:`flexsheet.twin.truth.TwinTruth`, param ``twin: {realism, truth_se
   (:class:`flexsheet.twin.truth_sheet.TruthSheet`: the drawn modulus and thickness scale its force, pre-strain
   and grip slip shift its strain), so a new truth seed builds no table and simulated time starts at once; a
   family with tables missing stops the node at setup with the command that ships them.
+* Task: the target mark the script shows the user (its point on the path and outward normal, without the
+  finger's lag, wander, depth and tremor: :meth:`flexsheet.twin.finger.FingerScript.surface_point`) on
+  ``/task/mark`` at ``rate_hz``, as the application publishes what it displays; hidden while paused.
 * Head: the viewer's true head (:mod:`flexsheet.twin.head`: a seeded slow sway about V, a scripted lean-in
   toward the sheet and occlusions of the glasses, param ``head``; ``head.still: true`` keeps the eye at V) on
   ``/world/head`` at ``rate_hz``, for the head camera's twin and the report.
@@ -53,7 +56,7 @@ from flexsheet.twin.head import Viewer
 from flexsheet.twin.truth import TwinTruth
 from flexsheet.twin.world import TruePhysics
 from flexsheet.twin.world_config import WorldConfig
-from messages import ArmJointState, ContactTruth, FingerTruth, HeadTruth, Heartbeat, SheetState
+from messages import ArmJointState, ContactTruth, FingerTruth, HeadTruth, Heartbeat, SheetState, TaskMark
 from messages import topics as T
 
 __all__ = ["WorldNode", "WorldParams", "Segment"]
@@ -118,8 +121,8 @@ WorldParams = params_model(
 
 
 class WorldNode(Node):
-    """Publishes ``/world/finger``, ``/world/sheet``, ``/world/contact`` and ``/world/head``; subscribes the
-    two arms' joint states."""
+    """Publishes ``/world/finger``, ``/world/sheet``, ``/world/contact``, ``/world/head`` and ``/task/mark``;
+    subscribes the two arms' joint states."""
 
     Params = WorldParams
     node_type = "world"
@@ -133,6 +136,7 @@ class WorldNode(Node):
         self.sheet_pub = self.publisher(T.SHEET_STATE)
         self.contact_pub = self.publisher(T.CONTACT_TRUTH)
         self.head_pub = self.publisher(T.HEAD_TRUTH)
+        self.mark_pub = self.publisher(T.TASK_MARK)
         self.truth = TwinTruth.draw(p.twin.truth_seed, p.twin.realism)
         self.head = p.head.motion(Viewer.draw(p.twin.truth_seed, p.twin.realism), p.twin.truth_seed)
         self.phys = TruePhysics(self.truth, size=p.sheet_size)    # FileNotFoundError: family not shipped
@@ -264,6 +268,8 @@ class WorldNode(Node):
             header=self.finger_pub.header("display"), position=pos, velocity=vel, segment=i,
             mode=script.mode, moving_time=float(script.moving_time), phase=script.phase(ts),
             target_angle=float(script.target_angle(ts)), visible=True))
+        mq, mn = script.surface_point(ts)
+        self.mark_pub.publish(TaskMark(header=self.mark_pub.header("display"), point=mq[0], normal=mn[0]))
         now = self.monotonic()
         if now - self.last_progress >= self.params.progress_period and t >= 0:
             self.last_progress = now
@@ -291,6 +297,8 @@ class WorldNode(Node):
         self.finger = AWAY.copy()
         self.finger_pub.publish(FingerTruth(header=self.finger_pub.header("display"), position=AWAY.copy(),
                                             velocity=np.zeros(3), phase="paused", visible=False))
+        self.mark_pub.publish(TaskMark(header=self.mark_pub.header("display"), point=AWAY.copy(),
+                                       normal=np.array([1.0, 0.0, 0.0]), visible=False))
 
     async def tick_sheet(self) -> None:
         self._read_arms()

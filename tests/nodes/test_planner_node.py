@@ -172,3 +172,38 @@ def test_the_pull_is_capped_at_the_targets_and_the_targets_carry_it():
                 q = kin.ik(left.pose, home_joints("left")).q
                 assert left.pull <= max_pull(kin, q)[0]          # the bridge takes it
     asyncio.run(scenario())
+
+
+def test_with_the_task_mark_the_away_sheet_waits_tangent_at_the_mark_offset_outside():
+    """A finger 30 mm in front of the home sheet, 20 mm up: without /task/mark the sheet stands on the object
+    under it; with the mark at the cylinder's front it waits there, tangent, 3 mm outside; a malformed mark is
+    refused and counted."""
+    from flexsheet.model.shapes import paper_cylinder
+    from messages import TaskMark
+
+    cyl = paper_cylinder()
+
+    async def scenario():
+        async with NodeHarness(PlannerNode, params={"object_stiffness": 20.0, "stiffness_from_scene": False,
+                                                    "psi_range": 0.0, "use_mark": True}) as h:
+            s = time.time()
+            finger = [0.03, 0.0, 0.02]
+            h.inject(topics.FINGERTIP, _ft(finger, stamp=s))
+            first = (await h.wait_for(topics.SHEET_TARGET, n=1, timeout=2.0))[0]
+            proj = cyl.project(tuple(finger))
+            assert np.allclose(first.contact_point, proj.point, atol=1e-9)       # no mark: under the finger
+            h.inject(topics.TASK_MARK, TaskMark(header=Header(stamp=s), point=np.zeros(3),
+                                                normal=np.array([1.0, 0.0, 0.0])))
+            await asyncio.sleep(0.1)
+            for k in range(1, 40):                  # 0.8 s: within the mark's mark_timeout (1 s)
+                h.inject(topics.FINGERTIP, _ft(finger, stamp=s + k * 0.02))
+                out = await h.wait_for(topics.SHEET_TARGET, n=k + 1, timeout=2.0)
+            last = out[-1]
+            assert not last.touching and np.allclose(last.normal, [1.0, 0.0, 0.0], atol=1e-6)
+            assert np.allclose(last.contact_point, 0.0, atol=1e-6)
+            assert np.allclose(last.sheet_origin, [0.003, 0.0, 0.0], atol=1e-6)   # 3 mm outside the front
+            h.inject(topics.TASK_MARK, TaskMark(header=Header(stamp=s + 1.3), point=np.zeros(3),
+                                                normal=np.zeros(3)))
+            await asyncio.sleep(0.1)
+            assert h.rejected(topics.TASK_MARK) == 1
+    asyncio.run(scenario())

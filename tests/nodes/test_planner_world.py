@@ -71,3 +71,20 @@ def test_world_script_params_are_finger_script_fields():
         WorldParams(script=[{"moving_time": -1.0}])
     with pytest.raises(ValueError, match="end_angle_deg"):    # SI only: the angle is end_angle, rad
         WorldParams(script=[{"end_angle_deg": 30.0}])
+
+
+def test_world_publishes_the_scripts_target_mark_on_the_task_topic(tmp_path, monkeypatch):
+    """/task/mark: the mark the script shows (its start point while the finger approaches), on the surface,
+    with its outward normal."""
+    monkeypatch.setenv("FLEXSHEET_CACHE", str(tmp_path))
+
+    async def scenario():
+        params = {"start_delay": 0.0, "script": [{"mode": "stroke", "moving_time": 2.0, "seed": 3}],
+                  "rate_hz": 100.0, "sheet_rate_hz": 50.0, "twin": {"realism": "ideal"}}
+        async with NodeHarness(WorldNode, params=params) as h:
+            mark = (await h.wait_for(T.TASK_MARK, n=2, timeout=3.0))[-1]
+            script = FingerScript(mode="stroke", moving_time=2.0, seed=3)
+            q, n = script.surface_point(0.0)
+            assert mark.visible and np.allclose(mark.point, q[0]) and np.allclose(mark.normal, n[0])
+            assert np.linalg.norm(mark.normal) == pytest.approx(1.0)
+    asyncio.run(scenario())
