@@ -19,9 +19,10 @@ Score (higher is better) = min joint-limit margin over those poses (each joint's
 share of its range, 0…0.5) + :data:`W_MANIP`·min(1, w/:data:`W_REF`) (Yoshikawa's w, the least over those
 poses) − :data:`W_TRAVEL`·(the pose's largest joint move from the arms' current solution / its speed limit,
 s) + :data:`W_CLEAR`·min(1, clearance/``near_distance``) (head keep-out, sheet and arms, when tracked; −1
-inside). A pose an arm does not solve within :data:`IK_ITER` iterations ends the scoring: −2 per pose,
-less the poses that did solve. Choice: the current ψ while it is within
-``psi_hysteresis`` of the best; else the paper's ψ = 0 when it is; else the best. The rate limiter turns the
+inside). A candidate whose own pose an arm does not solve within :data:`IK_ITER` iterations scores −∞ and is
+never chosen; a look-ahead pose that does not solve ends the scoring: −2 per pose, less the poses that did
+solve. Choice: the current ψ while it is within ``psi_hysteresis`` of the best, or while no candidate's
+pose solves; else the paper's ψ = 0 when it is; else the best. The rate limiter turns the
 sheet to it. Units m, rad, s; display frame.
 """
 
@@ -106,7 +107,7 @@ class PoseChoice:
         self.evaluations += 1
         best = max(scores, key=lambda p: (scores[p], -abs(p)))
         top, h = scores[best], self.cfg.psi_hysteresis
-        if scores.get(self.psi, -math.inf) >= top - h:
+        if top == -math.inf or scores.get(self.psi, -math.inf) >= top - h:
             return self.psi
         self.psi = 0.0 if scores.get(0.0, -math.inf) >= top - h else best
         return self.psi
@@ -152,8 +153,8 @@ class PoseChoice:
             for side, T in zip(("left", "right"), clamp_poses(o, nn, uu, stretch, size), strict=True):
                 kin = ar.kin[side]
                 r = kin.ik(T, q0.get(side, ar.seed[side]), max_iter=IK_ITER, max_jump=math.inf)
-                if not r.ok:            # a pose an arm cannot take: no better than every pose failing
-                    return -2.0 * len(poses) + i
+                if not r.ok:            # the pose itself: never chosen; a look-ahead: counted
+                    return -math.inf if i == 0 else -2.0 * len(poses) + i
                 margin = min(margin, float(np.min(np.minimum(r.q - kin.q_lower, kin.q_upper - r.q)
                                                   / (kin.q_upper - kin.q_lower))))
                 w_min = min(w_min, r.manipulability)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 
@@ -62,7 +63,7 @@ def test_stroke_quick_judges_the_10s_row_on_the_graph(tmp_path):
     assert (tmp_path / "stroke.png").stat().st_size > 5_000
 
 
-@pytest.mark.timeout(900)       # a new object's FEM model is built at its node's start (no cache)
+@pytest.mark.timeout(900)       # a new object's FEM model and first-use table are built at its node's start
 def test_objects_quick_runs_the_graph_on_a_drawn_object_and_judges_it(tmp_path):
     """``flexsheet experiment objects --quick``: draw 0 (a turned ellipsoid mesh) under the 10 s stroke on
     the simulated-clock graph; its figures come from the run's report and bag, and no bridge refuses a
@@ -75,5 +76,8 @@ def test_objects_quick_runs_the_graph_on_a_drawn_object_and_judges_it(tmp_path):
     assert "error" not in m and m["description"].startswith("drawn object 0: ellipsoid")
     assert 0.0 < m["felt_dtheta_deg"]["10"] < 5.0 and m["felt_dtheta_deg"]["30"] is None
     assert m["landings"]["touches"] >= 1 and m["bridge_holds"] == 0 and m["keepout_violations"] == 0
-    assert m["fem_model"] == "linear"                     # nobody built this object's nonlinear table
+    assert m["fem_model"] is None                         # the 10 s stroke alone: no press 2 mm in to judge
+    log = (tmp_path / "draw0" / "launch.log").read_text()
+    assert re.search(r"nonlinear path table (built on first use, now served|loaded from cache \(built on "
+                     r"first use\))", log)                # no manual step: built here, or by an earlier run
     assert (tmp_path / "draw0" / "draw0.obj").exists() and (tmp_path / "objects.png").stat().st_size > 5_000

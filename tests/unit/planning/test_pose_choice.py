@@ -79,3 +79,14 @@ def test_a_tie_does_not_flip_and_the_paper_rule_wins_within_the_hysteresis():
     assert ch.decide({0.0: 0.20, a: 0.20, -a: 0.24}) == a     # better by less than the hysteresis: stays
     assert ch.decide({0.0: 0.30, a: 0.20, -a: 0.32}) == 0.0   # clearly worse: back to the paper's rule
     assert ch.decide({0.0: 0.20, a: 0.20, -a: 0.32}) == -a    # and only a clear gain leaves it
+
+
+def test_a_candidate_whose_pose_does_not_solve_is_never_taken():
+    ch = PoseChoice(paper_cylinder(), PlannerConfig(), ArmReach(BASES))
+    a, inf = math.radians(10.0), math.inf
+    ch.psi = a
+    assert ch.decide({0.0: -inf, a: -inf, -a: -inf}) == a     # none solves: the current ψ stays
+    assert ch.decide({0.0: -9.0, a: -inf, -a: -inf}) == 0.0   # the current fails, the paper's pose solves
+    ch.psi = a
+    assert ch.decide({0.0: -inf, a: -7.0, -a: -inf}) == a     # only the current solves: it stays
+    assert ch.decide({0.0: -inf, a: -inf, -a: 0.1}) == -a     # the one that solves, however far
