@@ -81,7 +81,10 @@ class FemNode(FirstUseTable, Node):
         # loaded machine; flexsheet/fem/path_snapshots.py), during which heartbeats must go on
         table = await asyncio.to_thread(attach_table, self.model, self.scene, cfg)
         self.state_message = table.message
-        self.log.log(table.level, table.message)
+        builds = (isinstance(self.model, SceneModel) and table.missing and table.kind == "path"
+                  and p.table_build)
+        if not builds:                  # a first-use build says what serves meanwhile (first_use.py)
+            self.log.log(table.level, table.message)
         self.pub = self.publisher(topics.DEFORMATION)
         self.pub_force_depth = self.publisher(topics.FORCE_DEPTH)
         self.subscribe(topics.FINGERTIP, self.on_fingertip, qos=QoS.LATEST, sim_cost=LAB.compute("fem"))
@@ -97,7 +100,7 @@ class FemNode(FirstUseTable, Node):
         await asyncio.to_thread(self._publish_force_depth)
         if isinstance(self.model, SceneModel):     # its sparse fallback serves any push off the stroke's band
             await self.background(self._warm_sparse, "fem-sparse")
-            if table.missing and table.kind == "path" and p.table_build:
+            if builds:
                 self._start_first_use(cfg.cache_dir)
             if self._first_use is not None:       # a simulated clock waits for it (Node.background)
                 await self.background(self._first_use.join, "fem-first-use-wait")
