@@ -53,6 +53,8 @@ OFFSET_MAX, OFFSET_STEP = 0.08, 0.04
 STRETCH = 0.04
 #: random joint seeds tried after the home joints and the last solution
 RANDOM_SEEDS = 3
+#: the planner's defaults: the paper's reference axis ``u_ref`` and the sheet's size
+PLANNER = PlannerConfig()
 
 
 def presentable(reach: ArmReach, q: np.ndarray, n: np.ndarray, u: np.ndarray, offset: tuple[float, float],
@@ -63,7 +65,7 @@ def presentable(reach: ArmReach, q: np.ndarray, n: np.ndarray, u: np.ndarray, of
     v = np.cross(n, u)
     o = q - offset[0] * u - offset[1] * v
     found = {}
-    for side, T in zip(("left", "right"), clamp_poses(o, n, u, STRETCH, PlannerConfig().material.size),
+    for side, T in zip(("left", "right"), clamp_poses(o, n, u, STRETCH, PLANNER.material.size),
                        strict=True):
         kin = reach.kin[side]
         rng = np.random.default_rng(rng_seed)
@@ -84,7 +86,6 @@ def stroke_reach(scene: Scene, samples: int) -> dict:
     """The stroke of ``scene`` sampled at ``samples`` points (module doc): per sample the fraction, the
     tilt (deg), whether each of ``paper``, ``psi``, ``any`` presents it and the pose found; the shares."""
     reach = ArmReach({"left": geometry.LEFT_BASE, "right": geometry.RIGHT_BASE})
-    u_ref = PlannerConfig().u_ref
     pts, nrm = scene.stroke_at(np.linspace(0.0, 1.0, samples))
     psis = [math.radians(PSI_STEP_DEG * k) for k in range(int(90 / PSI_STEP_DEG) + 1)]
     psis = sorted({p for a in psis for p in (a, -a)}, key=abs)
@@ -92,28 +93,31 @@ def stroke_reach(scene: Scene, samples: int) -> dict:
     offsets = sorted(((a, b) for a in grid for b in grid), key=lambda o: math.hypot(*o))
     rows, last = [], {}
     for f, q, n in zip(np.linspace(0.0, 1.0, samples), pts, nrm, strict=True):
-        u0 = np.asarray(perp_unit(tuple(n), u_ref))
+        u0 = np.asarray(perp_unit(tuple(n), PLANNER.u_ref))
+        paper = presentable(reach, q, n, u0, (0.0, 0.0), last)
         row = {"fraction": float(f), "tilt_deg": math.degrees(math.acos(float(np.clip(n[0], -1.0, 1.0)))),
-               "paper": presentable(reach, q, n, u0, (0.0, 0.0), last)}
-        row["psi"], row["any"], row["pose"] = row["paper"], row["paper"], [0.0, 0.0, 0.0]
-        for off in offsets:
-            hit = next((p for p in psis if (p, off) != (0.0, (0.0, 0.0))
-                        and presentable(reach, q, n, np.asarray(turn(tuple(n), tuple(u0), p)), off, last)),
-                       None)
-            if row["any"] or hit is not None:
-                if not row["any"]:
-                    row["any"], row["pose"] = True, [math.degrees(hit), off[0], off[1]]
-                    row["psi"] = off == (0.0, 0.0)
-                break
-            if off == (0.0, 0.0):
-                row["psi"] = False
-        if not row["any"]:
-            row["pose"] = None
+               "paper": paper, "psi": paper, "any": paper, "pose": [0.0, 0.0, 0.0] if paper else None}
+        found = None if paper else _first_pose(reach, q, n, u0, psis, offsets, last)
+        if found is not None:
+            psi, off = found
+            row["any"], row["pose"], row["psi"] = True, [math.degrees(psi), off[0], off[1]], off == (0.0, 0.0)
         rows.append(row)
     share = {k: sum(r[k] for r in rows) / len(rows) for k in ("paper", "psi", "any")}
     ok = [r["tilt_deg"] for r in rows if r["any"]]
     return {"samples": rows, "share": share, "largest_tilt_presented_deg": max(ok) if ok else None,
             "largest_tilt_asked_deg": max(r["tilt_deg"] for r in rows)}
+
+
+def _first_pose(reach: ArmReach, q: np.ndarray, n: np.ndarray, u0: np.ndarray, psis: list[float],
+                offsets: list[tuple[float, float]], last: dict) -> tuple[float, tuple[float, float]] | None:
+    """The first (ψ rad, (s_u, s_v) m) of ``offsets`` × ``psis``, nearest the centre first, other than the
+    paper's pose, that :func:`presentable` accepts; None where none does."""
+    for off in offsets:
+        for p in psis:
+            u = np.asarray(turn(tuple(n), tuple(u0), p))
+            if (p, off) != (0.0, (0.0, 0.0)) and presentable(reach, q, n, u, off, last):
+                return p, off
+    return None
 
 
 def chart(result: dict, path: Path) -> None:
